@@ -1,0 +1,114 @@
+//! Builders: from decoded primitives to a [`tree::Tree`].
+//!
+//! Each preset names an algorithm and its knobs; `PREFER_FAST_TRACE`, `PREFER_FAST_BUILD`,
+//! `LOW_MEMORY` and the default select them (see [`Preset::from_flags`]). All builders make
+//! 4-wide trees top-down by splitting the most promising child of a node until it has four, so
+//! every inner node has four children and the size plan's node bound holds.
+
+pub mod binned_sah;
+pub mod morton;
+pub mod tree;
+
+use crate::math::Aabb;
+use ash::vk;
+use bytemuck::{Pod, Zeroable};
+
+/// A primitive as the builders see it: its bounds and its index in the decoded input.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct PrimRef {
+    pub lo: [f32; 3],
+    pub id: u32,
+    pub hi: [f32; 3],
+    pub pad: u32,
+}
+
+impl PrimRef {
+    pub fn new(b: &Aabb, id: u32) -> Self {
+        PrimRef { lo: b.lo, id, hi: b.hi, pad: 0 }
+    }
+    #[inline(always)]
+    pub fn bounds(&self) -> Aabb {
+        Aabb { lo: self.lo, hi: self.hi }
+    }
+    #[inline(always)]
+    pub fn center2(&self) -> [f32; 3] {
+        [self.lo[0] + self.hi[0], self.lo[1] + self.hi[1], self.lo[2] + self.hi[2]]
+    }
+}
+
+/// The algorithm behind a preset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Algorithm {
+    /// Top-down binned surface-area heuristic.
+    BinnedSah { bins: usize },
+    /// Sort by Morton code, split on the highest differing bit.
+    Morton,
+}
+
+/// A named set of builder knobs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Preset {
+    pub name: &'static str,
+    pub id: u32,
+    pub algorithm: Algorithm,
+    /// Leaves never hold more primitives than this.
+    pub max_leaf: usize,
+}
+
+impl Preset {
+    pub const FAST_TRACE: Preset =
+        Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8 };
+    pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 4 };
+    pub const DEFAULT: Preset =
+        Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8 };
+    pub const LOW_MEMORY: Preset =
+        Preset { name: "low-memory", id: 3, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 15 };
+    pub const ALL: [Preset; 4] = [Preset::FAST_TRACE, Preset::FAST_BUILD, Preset::DEFAULT, Preset::LOW_MEMORY];
+
+    /// The preset the build flags select. `PREFER_FAST_TRACE` and `PREFER_FAST_BUILD` are
+    /// exclusive (validated before); `LOW_MEMORY` wins over the default only.
+    pub fn from_flags(flags: vk::BuildAccelerationStructureFlagsKHR) -> Preset {
+        use vk::BuildAccelerationStructureFlagsKHR as F;
+        if flags.contains(F::PREFER_FAST_TRACE) {
+            Preset::FAST_TRACE
+        } else if flags.contains(F::PREFER_FAST_BUILD) {
+            Preset::FAST_BUILD
+        } else if flags.contains(F::LOW_MEMORY) {
+            Preset::LOW_MEMORY
+        } else {
+            Preset::DEFAULT
+        }
+    }
+
+    pub fn from_id(id: u32) -> Option<Preset> {
+        Preset::ALL.into_iter().find(|p| p.id == id)
+    }
+}
+
+/// Below this many primitives a subtree is built on the calling thread.
+pub(crate) const PARALLEL_THRESHOLD: usize = 4096;
+/// Past this depth the builders split at the object median, which bounds the depth.
+pub(crate) const MEDIAN_DEPTH: u32 = 40;
+
+/// Builds a tree over `refs`; on return `order[i]` is the `id` of the primitive at final
+/// position `i` (leaves refer to final positions). `keys` is working space of the same length.
+pub fn build(preset: &Preset, refs: &mut [PrimRef], keys: &mut [u64], keys_tmp: &mut [u64]) -> tree::Tree {
+    let tree = match preset.algorithm {
+        Algorithm::BinnedSah { bins } => binned_sah::build(refs, bins, preset.max_leaf),
+        Algorithm::Morton => morton::build(refs, keys, keys_tmp, preset.max_leaf),
+    };
+    tree
+}
+
+/// Picks which of a node's children to split next: the largest by `area` among those with at
+/// least two primitives.
+pub(crate) fn pick_child_to_split(children: &[(usize, usize, f32)]) -> Option<usize> {
+    let mut best: Option<(usize, f32)> = None;
+    for (i, &(begin, end, area)) in children.iter().enumerate() {
+        if end - begin >= 2 && best.is_none_or(|(_, a)| area > a) {
+            best = Some((i, area));
+        }
+    }
+    best.map(|(i, _)| i)
+}

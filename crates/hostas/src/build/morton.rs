@@ -1,0 +1,126 @@
+//! Fast builder: sort primitives by the Morton code of their centroid (radix sort), then split
+//! each range at the highest bit in which its first and last codes differ (a top-down LBVH),
+//! filling 4-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
+
+use super::binned_sah::RangeInfo;
+use super::tree::{Child, InnerNode, Tree};
+use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef, pick_child_to_split};
+use crate::math::Aabb;
+use rayon::prelude::*;
+
+/// Spreads the low 10 bits of `v` to every third bit.
+#[inline(always)]
+fn spread(v: u32) -> u32 {
+    let mut x = v & 0x3ff;
+    x = (x | (x << 16)) & 0x0300_00ff;
+    x = (x | (x << 8)) & 0x0300_f00f;
+    x = (x | (x << 4)) & 0x030c_30c3;
+    x = (x | (x << 2)) & 0x0924_9249;
+    x
+}
+
+/// Sorts `keys` (LSD radix, 8 bits a pass over the 32 code bits in the high half).
+fn radix_sort(keys: &mut [u64], tmp: &mut [u64]) {
+    let n = keys.len();
+    let (mut src, mut dst) = (keys, &mut tmp[..n]);
+    for pass in 0..4 {
+        let shift = 32 + 8 * pass;
+        let mut counts = [0usize; 256];
+        for k in src.iter() {
+            counts[((k >> shift) & 0xff) as usize] += 1;
+        }
+        let mut sum = 0;
+        for c in counts.iter_mut() {
+            let v = *c;
+            *c = sum;
+            sum += v;
+        }
+        for &k in src.iter() {
+            let b = ((k >> shift) & 0xff) as usize;
+            dst[counts[b]] = k;
+            counts[b] += 1;
+        }
+        std::mem::swap(&mut src, &mut dst);
+    }
+    // Four passes: the sorted data is back in `keys`.
+}
+
+pub fn build(refs: &mut [PrimRef], keys: &mut [u64], tmp: &mut [u64], max_leaf: usize) -> Tree {
+    let n = refs.len();
+    if n == 0 {
+        return Tree { root: None };
+    }
+    let info = RangeInfo::of(refs);
+    let c = info.centroids;
+    let scale = [0, 1, 2].map(|k| {
+        let ext = c.hi[k] - c.lo[k];
+        if ext > 0.0 { 1023.0 / ext } else { 0.0 }
+    });
+    let code = |r: &PrimRef| {
+        let p = r.center2();
+        let q = [0, 1, 2].map(|k| (((p[k] - c.lo[k]) * scale[k]) as u32).min(1023)); // NaN gives 0
+        (spread(q[0]) << 2) | (spread(q[1]) << 1) | spread(q[2])
+    };
+    keys[..n].par_iter_mut().zip(refs.par_iter()).enumerate().with_min_len(PARALLEL_THRESHOLD).for_each(|(i, (k, r))| {
+        *k = (code(r) as u64) << 32 | i as u64;
+    });
+    radix_sort(&mut keys[..n], tmp);
+    // Put the references in sorted order, so leaves read their bounds sequentially.
+    tmp[..n].par_iter_mut().zip(keys[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(t, k)| {
+        *t = k >> 32;
+    });
+    {
+        // Permute refs by the sorted keys through the scratch-free trick of sorting copies
+        // of the references: cheap next to the build itself.
+        let sorted: Vec<PrimRef> = keys[..n].iter().map(|k| refs[(*k & 0xffff_ffff) as usize]).collect();
+        refs.copy_from_slice(&sorted);
+    }
+    let codes = &tmp[..n];
+    let root = build_child(refs, codes, 0, max_leaf.max(4), 0);
+    Tree { root: Some(root) }
+}
+
+/// Position of the first code in `codes` that differs from the first in the highest differing
+/// bit, or the middle when all codes are equal.
+fn split_point(codes: &[u64]) -> usize {
+    let (first, last) = (codes[0], codes[codes.len() - 1]);
+    if first == last {
+        return codes.len() / 2;
+    }
+    let bit = 63 - (first ^ last).leading_zeros();
+    let mask = !((1u64 << bit) - 1) & 0xffff_ffff;
+    let prefix = first & mask;
+    // codes are sorted: the first one with the bit set starts the right half.
+    codes.partition_point(|&c| (c & mask) == prefix)
+}
+
+fn build_child(refs: &[PrimRef], codes: &[u64], base: u32, max_leaf: usize, depth: u32) -> (Aabb, Child) {
+    let n = refs.len();
+    if n <= max_leaf {
+        let mut b = Aabb::EMPTY;
+        for r in refs {
+            b = b.union(&r.bounds());
+        }
+        return (b, Child::Leaf { first: base, count: n as u32 });
+    }
+    let mut parts: Vec<(usize, usize)> = vec![(0, n)];
+    while parts.len() < 4 {
+        // Split the part with the most primitives (areas are not known top-down).
+        let keys: Vec<(usize, usize, f32)> = parts.iter().map(|&(b, e)| (b, e, (e - b) as f32)).collect();
+        let Some(i) = pick_child_to_split(&keys) else { break };
+        let (b, e) = parts[i];
+        let mid = if depth < MEDIAN_DEPTH { split_point(&codes[b..e]) } else { (e - b) / 2 };
+        let mid = mid.clamp(1, e - b - 1);
+        parts[i] = (b, b + mid);
+        parts.push((b + mid, e));
+    }
+    parts.sort();
+    let build = |&(b, e): &(usize, usize)| build_child(&refs[b..e], &codes[b..e], base + b as u32, max_leaf, depth + 1);
+    let children: Vec<(Aabb, Child)> =
+        if n > PARALLEL_THRESHOLD { parts.par_iter().map(build).collect() } else { parts.iter().map(build).collect() };
+    let mut bounds = Aabb::EMPTY;
+    for (b, _) in &children {
+        bounds = bounds.union(b);
+    }
+    (bounds, Child::Inner(Box::new(InnerNode { children })))
+}

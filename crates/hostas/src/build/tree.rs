@@ -1,0 +1,43 @@
+//! The builders' output: a 4-wide tree over positions in the final primitive order. Builders
+//! know geometry, not bytes; `layout::encode` turns this into bytes.
+
+use crate::math::Aabb;
+
+#[derive(Debug)]
+pub enum Child {
+    /// Primitives `first..first + count` of the final order.
+    Leaf { first: u32, count: u32 },
+    Inner(Box<InnerNode>),
+}
+
+/// An inner node with two to four children, each with its exact bounds.
+#[derive(Debug, Default)]
+pub struct InnerNode {
+    pub children: Vec<(Aabb, Child)>,
+}
+
+/// A built tree: `root` covers every stored primitive; `None` when there are none.
+#[derive(Debug)]
+pub struct Tree {
+    pub root: Option<(Aabb, Child)>,
+}
+
+impl Tree {
+    /// Number of inner nodes and depth (root = 1).
+    pub fn shape(&self) -> (u32, u32) {
+        fn walk(c: &Child, depth: u32, nodes: &mut u32, max_depth: &mut u32) {
+            if let Child::Inner(n) = c {
+                *nodes += 1;
+                *max_depth = (*max_depth).max(depth);
+                for (_, ch) in &n.children {
+                    walk(ch, depth + 1, nodes, max_depth);
+                }
+            }
+        }
+        let (mut nodes, mut depth) = (0, 0);
+        if let Some((_, c)) = &self.root {
+            walk(c, 1, &mut nodes, &mut depth);
+        }
+        (nodes, depth)
+    }
+}

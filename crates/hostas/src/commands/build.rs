@@ -1,0 +1,658 @@
+//! `vkGetAccelerationStructureBuildSizesKHR` and `vkBuildAccelerationStructuresKHR` (build and
+//! update).
+
+use super::validate;
+use crate::build::{self, PrimRef, Preset};
+use crate::device::{AccelerationStructure, AsObject, Device};
+use crate::error::{Error, Location, Result};
+use crate::input::aabbs::AabbReader;
+use crate::input::instances::{Instance, InstanceReader};
+use crate::input::triangles::TriangleReader;
+use crate::input::{BuildGeometryInfo, BuildRangeInfo, GeometryData};
+use crate::layout::encode::{self, HeaderFields};
+use crate::layout::plan::{self, Plan};
+use crate::layout::view::{self, View};
+use crate::layout::{
+    EMPTY_CHILD, GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord, Kind, LEAF_BIT, Node,
+    PrimKind,
+};
+use crate::math::{Aabb, Affine};
+use ash::vk;
+use rayon::prelude::*;
+
+/// `VkAccelerationStructureBuildSizesInfoKHR`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct BuildSizes {
+    pub acceleration_structure_size: u64,
+    pub update_scratch_size: u64,
+    pub build_scratch_size: u64,
+}
+
+/// Decoded primitive data as it sits in scratch, indexed by primitive sequence number.
+const TRI_BYTES: usize = 36;
+
+fn scratch_per_prim(k: PrimKind) -> u64 {
+    // PrimRef, two sort keys, and the decoded primitive.
+    32 + 16 + k.prim_size()
+}
+
+fn build_scratch_size(k: PrimKind, n: u64) -> u64 {
+    plan::build_scratch_size(0) + crate::layout::align_up(scratch_per_prim(k) * n, 64)
+}
+
+/// One geometry's reader.
+enum Reader<'a> {
+    Triangles(TriangleReader<'a>),
+    Aabbs(AabbReader<'a>),
+    Instances(InstanceReader<'a>),
+}
+
+impl Device {
+    /// `vkGetAccelerationStructureBuildSizesKHR`: sizes for any later build with the same
+    /// description and at most `max_primitive_counts[g]` primitives in geometry `g`.
+    #[doc(alias = "vkGetAccelerationStructureBuildSizesKHR")]
+    pub fn build_sizes(
+        &self,
+        build_type: vk::AccelerationStructureBuildTypeKHR,
+        info: &BuildGeometryInfo,
+        max_primitive_counts: &[u32],
+    ) -> Result<BuildSizes> {
+        let at = Location::NONE;
+        if build_type == vk::AccelerationStructureBuildTypeKHR::DEVICE {
+            return Err(Error::NotSupported("device builds (buildType DEVICE): hostas implements the host commands".into()));
+        }
+        let (kind, prim_kind) = validate::info(info, at)?;
+        if max_primitive_counts.len() != info.geometries.len() {
+            return Err(Error::vuid(
+                "VUID-vkGetAccelerationStructureBuildSizesKHR-pBuildInfo-03619",
+                at,
+                format!("{} maximum primitive counts for {} geometries", max_primitive_counts.len(), info.geometries.len()),
+            ));
+        }
+        let total: u64 = max_primitive_counts.iter().map(|&c| c as u64).sum();
+        validate::counts(kind, prim_kind, total, at, "VUID-vkGetAccelerationStructureBuildSizesKHR-pBuildInfo-03785")?;
+        let plan = Plan::new(prim_kind, info.geometries.len() as u64, total);
+        Ok(BuildSizes {
+            acceleration_structure_size: plan.total_size,
+            update_scratch_size: plan::update_scratch_size(total),
+            build_scratch_size: build_scratch_size(prim_kind, total),
+        })
+    }
+
+    /// `vkBuildAccelerationStructuresKHR`: builds or updates each info's destination.
+    /// `ranges[i]` holds one range per geometry of `infos[i]`. Infos are independent; each
+    /// is built with all threads of the current rayon pool.
+    #[doc(alias = "vkBuildAccelerationStructuresKHR")]
+    pub fn build_acceleration_structures(&self, infos: &mut [BuildGeometryInfo], ranges: &[&[BuildRangeInfo]]) -> Result<()> {
+        if infos.is_empty() {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-infoCount-arraylength", Location::NONE, "infoCount must be greater than 0"));
+        }
+        if ranges.len() != infos.len() {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-ppBuildRangeInfos-parameter",
+                Location::NONE,
+                format!("{} range arrays for {} infos", ranges.len(), infos.len()),
+            ));
+        }
+        // Cross-info rules first, so that nothing is written when any info is invalid.
+        let mut dsts: Vec<AsObject> = Vec::with_capacity(infos.len());
+        for (i, info) in infos.iter().enumerate() {
+            let at = Location::info(i);
+            let dst = info.dst.ok_or_else(|| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800", at, "dstAccelerationStructure is NULL"))?;
+            let obj = self.object(dst).map_err(|_| {
+                Error::vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800", at, format!("dstAccelerationStructure {:#x} is not a valid handle", dst.0))
+            })?;
+            for (j, other) in dsts.iter().enumerate() {
+                if other.handle == obj.handle {
+                    return Err(Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03698",
+                        at,
+                        format!("the destination is also the destination of info {j}"),
+                    ));
+                }
+                if other.buffer.id() == obj.buffer.id() && obj.offset < other.offset + other.size && other.offset < obj.offset + obj.size {
+                    return Err(Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03702",
+                        at,
+                        format!("the destination's memory overlaps the destination of info {j}"),
+                    ));
+                }
+            }
+            dsts.push(obj);
+        }
+        for (i, info) in infos.iter().enumerate() {
+            if let Some(src) = info.src {
+                for (j, d) in dsts.iter().enumerate() {
+                    if j != i && d.handle == src.0 {
+                        return Err(Error::vuid(
+                            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03403",
+                            Location::info(i),
+                            format!("the source is the destination of info {j}"),
+                        ));
+                    }
+                }
+            }
+        }
+        for (i, (info, dst)) in infos.iter_mut().zip(&dsts).enumerate() {
+            let at = Location::info(i);
+            match info.mode {
+                vk::BuildAccelerationStructureModeKHR::BUILD => self.build_one(info, ranges[i], dst, at, &dsts)?,
+                vk::BuildAccelerationStructureModeKHR::UPDATE => self.update_one(info, ranges[i], dst, at)?,
+                other => {
+                    return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-mode-04628", at, format!("unknown mode {other:?}")));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn readers<'a>(&self, info: &BuildGeometryInfo<'a>, ranges: &[BuildRangeInfo], at: Location) -> Result<Vec<Reader<'a>>> {
+        if ranges.len() != info.geometries.len() {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-ppBuildRangeInfos-03676",
+                at,
+                format!("{} range infos for {} geometries", ranges.len(), info.geometries.len()),
+            ));
+        }
+        info.geometries
+            .iter()
+            .zip(ranges)
+            .enumerate()
+            .map(|(g, (geom, range))| {
+                let at = at.geometry(g);
+                Ok(match &geom.data {
+                    GeometryData::Triangles(t) => Reader::Triangles(TriangleReader::new(t, range, at)?),
+                    GeometryData::Aabbs(a) => Reader::Aabbs(AabbReader::new(a, range, at)?),
+                    GeometryData::Instances(d) => Reader::Instances(InstanceReader::new(d, range, at)?),
+                })
+            })
+            .collect()
+    }
+
+    fn check_dst_type(info: &BuildGeometryInfo, kind: Kind, dst: &AsObject, at: Location) -> Result<()> {
+        let ok = dst.ty == vk::AccelerationStructureTypeKHR::GENERIC
+            || (kind == Kind::TopLevel && dst.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL)
+            || (kind == Kind::BottomLevel && dst.ty == vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL);
+        if !ok {
+            let vuid = if kind == Kind::TopLevel { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03699" } else { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03700" };
+            return Err(Error::vuid(vuid, at, format!("destination was created as {:?}, the build is {:?}", dst.ty, info.ty)));
+        }
+        Ok(())
+    }
+
+    fn geometry_records(info: &BuildGeometryInfo, ranges: &[BuildRangeInfo]) -> Vec<GeometryRecord> {
+        let mut first = 0u32;
+        info.geometries
+            .iter()
+            .zip(ranges)
+            .map(|(g, r)| {
+                let (vertex_format, index_type, max_vertex, extra) = match &g.data {
+                    GeometryData::Triangles(t) => (t.vertex_format.as_raw() as u32, t.index_type.as_raw() as u32, t.max_vertex, t.transform_data.is_some() as u32),
+                    GeometryData::Instances(crate::input::InstancesData::Pointers(_)) => (0, 0, 0, 2),
+                    _ => (0, 0, 0, 0),
+                };
+                let rec = GeometryRecord {
+                    first_primitive: first,
+                    primitive_count: r.primitive_count,
+                    flags: g.flags.as_raw(),
+                    geometry_type: g.data.geometry_type().as_raw() as u32,
+                    vertex_format,
+                    index_type,
+                    max_vertex,
+                    extra,
+                };
+                first += r.primitive_count;
+                rec
+            })
+            .collect()
+    }
+
+    fn header_flags(info: &BuildGeometryInfo) -> u32 {
+        let opaque = info.geometries.iter().filter(|g| g.flags.contains(vk::GeometryFlagsKHR::OPAQUE)).count();
+        if opaque == info.geometries.len() {
+            HEADER_ALL_OPAQUE
+        } else if opaque == 0 {
+            HEADER_NONE_OPAQUE
+        } else {
+            0
+        }
+    }
+
+    /// Reads each instance's BLAS: the root bounds, after checking the reference (VUID-03779).
+    fn instance_bounds(&self, inst: &Instance, dsts: &[AsObject], at: Location) -> Result<Aabb> {
+        let r = inst.acceleration_structure_reference;
+        let bad = |msg: String| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03779", at, msg);
+        let obj = self.object(AccelerationStructure(r)).map_err(|_| bad(format!("accelerationStructureReference {r:#x} is not an acceleration structure of this device")))?;
+        if dsts.iter().any(|d| d.handle == r) {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-None-03407", at, format!("instance references {r:#x}, a destination of this call")));
+        }
+        let header = self
+            .with_bytes(AccelerationStructure(r), |b| view::read_header(b).map_err(|reason| Error::NotBuilt { handle: r, reason }))
+            .map_err(|e| bad(format!("accelerationStructureReference {r:#x} is not a built structure: {e}")))?;
+        if header.kind != Kind::BottomLevel as u32 || obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
+            return Err(bad(format!("accelerationStructureReference {r:#x} is not a bottom-level structure")));
+        }
+        Ok(if header.stored_count == 0 {
+            // A degenerate instance: treated as a point at the instance origin.
+            Aabb::point(inst.transform.point([0.0; 3]))
+        } else {
+            inst.transform.transform_aabb(&header.bounds)
+        })
+    }
+
+    fn instance_record(inst: &Instance, id: u32, at: Location) -> Result<InstanceRecord> {
+        let inv = inst.transform.inverse().ok_or_else(|| {
+            Error::vuid("VUID-VkTransformMatrixKHR-matrix-03799", at, "the instance transform's first three columns are not invertible")
+        })?;
+        Ok(InstanceRecord {
+            object_to_world: inst.transform.to_rows(),
+            world_to_object: inv.to_rows(),
+            acceleration_structure_reference: inst.acceleration_structure_reference,
+            instance_id: id,
+            custom_index: inst.custom_index,
+            mask: inst.mask as u32,
+            sbt_record_offset: inst.sbt_record_offset,
+            flags: inst.flags.as_raw(),
+            reserved: 0,
+        })
+    }
+
+    fn build_one(&self, info: &mut BuildGeometryInfo, ranges: &[BuildRangeInfo], dst: &AsObject, at: Location, dsts: &[AsObject]) -> Result<()> {
+        let (kind, prim_kind) = validate::info(info, at)?;
+        Self::check_dst_type(info, kind, dst, at)?;
+        let readers = self.readers(info, ranges, at)?;
+        let total: u64 = ranges.iter().map(|r| r.primitive_count as u64).sum();
+        validate::counts(kind, prim_kind, total, at, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03801")?;
+        let plan = Plan::new(prim_kind, info.geometries.len() as u64, total);
+        if dst.size < plan.total_size {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03675",
+                at,
+                format!("destination size {} is smaller than the build size {}", dst.size, plan.total_size),
+            ));
+        }
+        let need = build_scratch_size(prim_kind, total);
+        let records = Self::geometry_records(info, ranges);
+        let header_flags = Self::header_flags(info);
+        let flags = info.flags;
+        let scratch = info.scratch.as_deref_mut().unwrap_or(&mut []);
+        if (scratch.len() as u64) < need {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03725",
+                at,
+                format!("scratch holds {} bytes, the build needs {need}", scratch.len()),
+            ));
+        }
+        let n = total as usize;
+        let (refs, keys, keys_tmp, data) = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
+
+        // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
+        let mut active = vec![false; 0];
+        match prim_kind {
+            PrimKind::Instances => {
+                let Some(Reader::Instances(r)) = readers.first() else { return Err(Error::NotSupported("instances without a reader".into())) };
+                let out: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(data).map_err(|e| Error::NotSupported(format!("scratch carve: {e}")))?;
+                let mut stored = 0usize;
+                for i in 0..r.primitive_count {
+                    let at = at.geometry(0).primitive(i);
+                    let inst = r.instance(i)?;
+                    if inst.acceleration_structure_reference == 0 {
+                        continue;
+                    }
+                    let bounds = self.instance_bounds(&inst, dsts, at)?;
+                    out[i as usize] = Self::instance_record(&inst, i, at)?;
+                    refs[stored] = PrimRef::new(&bounds, i);
+                    stored += 1;
+                }
+                active.resize(stored, true);
+            }
+            PrimKind::Triangles | PrimKind::Aabbs => {
+                let stored = decode_geometries(&readers, &records, refs, data)?;
+                active.resize(stored, true);
+            }
+            PrimKind::None => {}
+        }
+        let stored = active.len();
+        let preset = Preset::from_flags(flags);
+        let refs = &mut refs[..stored];
+        let tree = build::build(&preset, refs, &mut keys[..stored], &mut keys_tmp[..stored]);
+
+        let fields = HeaderFields {
+            kind: kind as u32,
+            build_flags: flags.as_raw(),
+            prim_kind: prim_kind as u32,
+            primitive_count: total as u32,
+            stored_count: stored as u32,
+            header_flags,
+            preset: preset.id,
+        };
+        let data = &*data;
+        let refs = &*refs;
+        self.with_dst_src(dst, None, |bytes, _| {
+            let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
+            write_prims(bytes, &header, prim_kind, refs, data)
+        })
+    }
+
+    fn update_one(&self, info: &mut BuildGeometryInfo, ranges: &[BuildRangeInfo], dst: &AsObject, at: Location) -> Result<()> {
+        let (kind, prim_kind) = validate::info(info, at)?;
+        Self::check_dst_type(info, kind, dst, at)?;
+        let src_handle = info.src.ok_or_else(|| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-04630", at, "mode is UPDATE but srcAccelerationStructure is NULL"))?;
+        let src = self.object(src_handle).map_err(|_| {
+            Error::vuid("VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629", at, format!("srcAccelerationStructure {:#x} is not a valid handle", src_handle.0))
+        })?;
+        let src_header = self.header(src_handle).map_err(|e| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03667", at, format!("source holds no built structure: {e}")))?;
+        if src_header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw() == 0 {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03667", at, "the source was not built with ALLOW_UPDATE"));
+        }
+        if src_header.build_flags != info.flags.as_raw() {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03759",
+                at,
+                format!("flags {:#x} differ from the source's {:#x}", info.flags.as_raw(), src_header.build_flags),
+            ));
+        }
+        if src_header.kind != kind as u32 {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03760", at, "type differs from the source's"));
+        }
+        if src_header.geometry_count as usize != info.geometries.len() {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03758",
+                at,
+                format!("geometryCount {} differs from the source's {}", info.geometries.len(), src_header.geometry_count),
+            ));
+        }
+        if dst.handle != src.handle && dst.size < src_header.used_size {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03675",
+                at,
+                format!("destination size {} is smaller than the source's {}", dst.size, src_header.used_size),
+            ));
+        }
+        let scratch_len = info.scratch.as_deref().map_or(0, |s| s.len()) as u64;
+        let need = plan::update_scratch_size(src_header.primitive_count as u64);
+        if scratch_len < need {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03726", at, format!("scratch holds {scratch_len} bytes, the update needs {need}")));
+        }
+        let readers = self.readers(info, ranges, at)?;
+        let records = Self::geometry_records(info, ranges);
+        // Instances: decode before locking, to read the referenced BLASes' bounds.
+        let mut instance_updates: Vec<(InstanceRecord, Aabb)> = Vec::new();
+        if let Some(Reader::Instances(r)) = readers.first() {
+            for i in 0..r.primitive_count {
+                let at = at.geometry(0).primitive(i);
+                let inst = r.instance(i)?;
+                if inst.acceleration_structure_reference == 0 {
+                    continue;
+                }
+                let bounds = self.instance_bounds(&inst, &[], at)?;
+                instance_updates.push((Self::instance_record(&inst, i, at)?, bounds));
+            }
+        }
+        self.with_dst_src(dst, Some(&src), |bytes, src_bytes| {
+            if let Some(s) = src_bytes {
+                let used = src_header.used_size as usize;
+                bytes[..used].copy_from_slice(&s[..used]);
+                let mut h: Header = bytemuck::pod_read_unaligned(&bytes[..256]);
+                h.allocated_size = bytes.len() as u64;
+                bytes[..256].copy_from_slice(bytemuck::bytes_of(&h));
+            }
+            let view = View::parse(bytes).map_err(|reason| Error::NotBuilt { handle: src.handle, reason })?;
+            check_update_geometries(view.geometries, &records, at)?;
+            let header = view.header;
+            refit(bytes, &header, prim_kind, &readers, &instance_updates, at)
+        })
+    }
+}
+
+/// Splits scratch into aligned arrays: refs, keys, key buffer, primitive data.
+fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<(&mut [PrimRef], &mut [u64], &mut [u64], &mut [u8])> {
+    let misalign = scratch.as_ptr().align_offset(64).min(scratch.len());
+    let s = &mut scratch[misalign..];
+    let carve = |s: &mut [u8], bytes: usize| -> Result<(usize, usize)> {
+        let _ = s;
+        Ok((bytes.div_ceil(64) * 64, bytes))
+    };
+    let (r_len, _) = carve(s, 32 * n)?;
+    let (k_len, _) = carve(s, 8 * n)?;
+    if s.len() < r_len + 2 * k_len + prim_size * n {
+        return Err(Error::RangeTooShort { what: "scratch", needed: (r_len + 2 * k_len + prim_size * n) as u64, available: s.len() as u64, location: Location::NONE });
+    }
+    let (r, rest) = s.split_at_mut(r_len);
+    let (k, rest) = rest.split_at_mut(k_len);
+    let (kt, rest) = rest.split_at_mut(k_len);
+    let data = &mut rest[..prim_size * n];
+    let cast_err = |e: bytemuck::PodCastError| Error::NotSupported(format!("scratch alignment: {e}"));
+    Ok((
+        bytemuck::try_cast_slice_mut(&mut r[..32 * n]).map_err(cast_err)?,
+        bytemuck::try_cast_slice_mut(&mut k[..8 * n]).map_err(cast_err)?,
+        bytemuck::try_cast_slice_mut(&mut kt[..8 * n]).map_err(cast_err)?,
+        data,
+    ))
+}
+
+/// Decodes all triangles or AABBs into `data` (indexed by sequence number) and writes a
+/// `PrimRef` per active primitive into `refs`; returns how many are active. Parallel over
+/// chunks; the first error in primitive order is reported.
+fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut [PrimRef], data: &mut [u8]) -> Result<usize> {
+    const CHUNK: usize = 4096;
+    let mut stored = 0usize;
+    for (reader, rec) in readers.iter().zip(records) {
+        let first = rec.first_primitive as usize;
+        let count = rec.primitive_count as usize;
+        let size = match reader {
+            Reader::Triangles(_) => TRI_BYTES,
+            _ => 24,
+        };
+        let geom_data = &mut data[first * size..(first + count) * size];
+        // Pass 1: decode in parallel; bounds NaN marks inactive.
+        let results: Vec<Result<()>> = geom_data
+            .par_chunks_mut(CHUNK * size)
+            .enumerate()
+            .map(|(c, chunk)| {
+                for (j, out) in chunk.chunks_exact_mut(size).enumerate() {
+                    let i = (c * CHUNK + j) as u32;
+                    match reader {
+                        Reader::Triangles(t) => {
+                            let v = t.triangle(i)?;
+                            let f: [f32; 9] = match v {
+                                Some(v) => [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]],
+                                None => [f32::NAN; 9],
+                            };
+                            out.copy_from_slice(bytemuck::cast_slice(&f));
+                        }
+                        Reader::Aabbs(a) => {
+                            let f: [f32; 6] = match a.aabb(i)? {
+                                Some(b) => [b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]],
+                                None => [f32::NAN; 6],
+                            };
+                            out.copy_from_slice(bytemuck::cast_slice(&f));
+                        }
+                        Reader::Instances(_) => {}
+                    }
+                }
+                Ok(())
+            })
+            .collect();
+        for r in results {
+            r?;
+        }
+        // Pass 2: references for the active primitives, in order.
+        for (i, p) in geom_data.chunks_exact(size).enumerate() {
+            let f = |k: usize| f32::from_le_bytes([p[4 * k], p[4 * k + 1], p[4 * k + 2], p[4 * k + 3]]);
+            if f(0).is_nan() {
+                continue;
+            }
+            let b = if size == TRI_BYTES {
+                let mut b = Aabb::point([f(0), f(1), f(2)]);
+                b.grow([f(3), f(4), f(5)]);
+                b.grow([f(6), f(7), f(8)]);
+                b
+            } else {
+                Aabb { lo: [f(0), f(1), f(2)], hi: [f(3), f(4), f(5)] }
+            };
+            refs[stored] = PrimRef::new(&b, (first + i) as u32);
+            stored += 1;
+        }
+    }
+    Ok(stored)
+}
+
+/// Writes the primitive sections in the tree's final order.
+fn write_prims(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, refs: &[PrimRef], data: &[u8]) -> Result<()> {
+    let size = prim_kind.prim_size() as usize;
+    let n = refs.len();
+    let (head, ids_part) = bytes.split_at_mut(h.prim_ids_offset as usize);
+    let ids: &mut [u32] = bytemuck::try_cast_slice_mut(&mut ids_part[..4 * n]).map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+    ids.par_iter_mut().zip(refs.par_iter()).with_min_len(4096).for_each(|(o, r)| *o = r.id);
+    let prims = &mut head[h.prims_offset as usize..h.prims_offset as usize + size * n];
+    if size > 0 {
+        prims.par_chunks_mut(size).zip(refs.par_iter()).with_min_len(1024).for_each(|(out, r)| {
+            let at = r.id as usize * size;
+            out.copy_from_slice(&data[at..at + size]);
+        });
+    }
+    Ok(())
+}
+
+fn check_update_geometries(old: &[GeometryRecord], new: &[GeometryRecord], at: Location) -> Result<()> {
+    for (g, (o, n)) in old.iter().zip(new).enumerate() {
+        let at = at.geometry(g);
+        let rule = |cond: bool, vuid: &'static str, what: &str| {
+            if cond { Ok(()) } else { Err(Error::vuid(vuid, at, format!("{what} differs from the source's"))) }
+        };
+        rule(o.geometry_type == n.geometry_type, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03761", "geometryType")?;
+        rule(o.flags == n.flags, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03762", "geometry flags")?;
+        rule(o.vertex_format == n.vertex_format, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03763", "vertexFormat")?;
+        rule(o.max_vertex == n.max_vertex, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03764", "maxVertex")?;
+        rule(o.index_type == n.index_type, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03765", "indexType")?;
+        if o.extra & 1 != n.extra & 1 {
+            let vuid = if o.extra & 1 == 0 { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03766" } else { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03767" };
+            return Err(Error::vuid(vuid, at, "transformData NULL-ness differs from the source's"));
+        }
+        rule(o.primitive_count == n.primitive_count, "VUID-vkBuildAccelerationStructuresKHR-primitiveCount-03769", "primitiveCount")?;
+    }
+    Ok(())
+}
+
+/// Update: re-reads every primitive (index values included: the CTS changes them), rewrites
+/// the stored primitives, and refits the nodes bottom-up (children come after parents in the
+/// depth-first order, so one reverse pass suffices).
+fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], instances: &[(InstanceRecord, Aabb)], at: Location) -> Result<()> {
+    let n = h.stored_count as usize;
+    let geoms: Vec<GeometryRecord> = bytemuck::pod_collect_to_vec(&bytes[h.geometries_offset as usize..h.geometries_offset as usize + 32 * h.geometry_count as usize]);
+    let ids: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[h.prim_ids_offset as usize..h.prim_ids_offset as usize + 4 * n]);
+    let locate = |id: u32| {
+        let g = geoms.partition_point(|r| r.first_primitive <= id).saturating_sub(1);
+        (g, id - geoms[g].first_primitive)
+    };
+    // New bounds per stored primitive.
+    let mut bounds = vec![Aabb::EMPTY; n];
+    let size = prim_kind.prim_size() as usize;
+    let prims = &mut bytes[h.prims_offset as usize..h.prims_offset as usize + size * n];
+    match prim_kind {
+        PrimKind::Triangles | PrimKind::Aabbs => {
+            // Every primitive: stored ones must still be active, the others still inactive.
+            let mut active_now = 0usize;
+            for (g, r) in readers.iter().enumerate() {
+                let count = match r {
+                    Reader::Triangles(t) => t.primitive_count,
+                    Reader::Aabbs(a) => a.primitive_count,
+                    Reader::Instances(_) => 0,
+                };
+                for i in 0..count {
+                    let active = match r {
+                        Reader::Triangles(t) => t.triangle(i)?.is_some(),
+                        Reader::Aabbs(a) => a.aabb(i)?.is_some(),
+                        Reader::Instances(_) => false,
+                    };
+                    let _ = g;
+                    active_now += active as usize;
+                }
+            }
+            let results: Vec<Result<()>> = prims
+                .par_chunks_mut(size)
+                .zip(bounds.par_iter_mut())
+                .zip(ids.par_iter())
+                .with_min_len(1024)
+                .map(|((out, b), &id)| {
+                    let (g, p) = locate(id);
+                    let at = at.geometry(g).primitive(p);
+                    let inactive = || Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at, "an active primitive became inactive in an update");
+                    match &readers[g] {
+                        Reader::Triangles(t) => {
+                            let v = t.triangle(p)?.ok_or_else(inactive)?;
+                            let f = [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]];
+                            out.copy_from_slice(bytemuck::cast_slice(&f));
+                            let mut bb = Aabb::point(v[0]);
+                            bb.grow(v[1]);
+                            bb.grow(v[2]);
+                            *b = bb;
+                        }
+                        Reader::Aabbs(a) => {
+                            let bb = a.aabb(p)?.ok_or_else(inactive)?;
+                            out.copy_from_slice(bytemuck::cast_slice(&[bb.lo[0], bb.lo[1], bb.lo[2], bb.hi[0], bb.hi[1], bb.hi[2]]));
+                            *b = bb;
+                        }
+                        Reader::Instances(_) => {}
+                    }
+                    Ok(())
+                })
+                .collect();
+            for r in results {
+                r?;
+            }
+            if active_now != n {
+                return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663", at, "an inactive primitive became active in an update"));
+            }
+        }
+        PrimKind::Instances => {
+            if instances.len() != n {
+                return Err(Error::vuid(
+                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
+                    at,
+                    format!("{} active instances, the source has {n}: activity must not change in an update", instances.len()),
+                ));
+            }
+            let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(prims).map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+            for (slot, rec) in recs.iter_mut().enumerate() {
+                let id = ids[slot];
+                let Some(pos) = instances.iter().position(|(r, _)| r.instance_id == id) else {
+                    return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at.geometry(0).primitive(id), "an active instance became inactive in an update"));
+                };
+                *rec = instances[pos].0;
+                bounds[slot] = instances[pos].1;
+            }
+        }
+        PrimKind::None => {}
+    }
+    // Refit: leaves from primitive bounds, inner children from their node's children.
+    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut bytes[h.nodes_offset as usize..h.nodes_offset as usize + 128 * h.node_count as usize])
+        .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+    let mut root = Aabb::EMPTY;
+    for i in (0..nodes.len()).rev() {
+        for k in 0..4 {
+            let c = nodes[i].child[k];
+            if c == EMPTY_CHILD {
+                continue;
+            }
+            let b = if c & LEAF_BIT != 0 {
+                let first = (c & !LEAF_BIT) as usize;
+                let count = nodes[i].count[k] as usize;
+                bounds[first..first + count].iter().fold(Aabb::EMPTY, |a, b| a.union(b))
+            } else {
+                let child = &nodes[c as usize];
+                (0..4).filter(|&j| child.child[j] != EMPTY_CHILD).fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
+            };
+            nodes[i].set_bounds(k, &b);
+            if i == 0 {
+                root = root.union(&b);
+            }
+        }
+    }
+    let mut header = *h;
+    header.bounds = root;
+    bytes[..256].copy_from_slice(bytemuck::bytes_of(&header));
+    let _ = Affine::IDENTITY;
+    Ok(())
+}

@@ -1,0 +1,216 @@
+//! Reading triangles from host memory, as `VkAccelerationStructureBuildRangeInfoKHR` says:
+//! indexed triangles read `3 * primitiveCount` indices at `indexData + primitiveOffset` and add
+//! `firstVertex` to each; non-indexed ones read vertices from
+//! `vertexData + primitiveOffset + firstVertex * vertexStride`. The optional geometry transform
+//! at `transformData + transformOffset` is applied to every vertex.
+
+use super::vertex_format::{VertexFormatInfo, vertex_format_info};
+use super::{BuildRangeInfo, TrianglesData, read_bytes, read_transform};
+use crate::error::{Error, Location, Result};
+use crate::math::{Affine, Vec3};
+use ash::vk;
+
+/// A validated view of one triangle geometry's range, ready to decode triangle `i`.
+#[derive(Clone, Copy, Debug)]
+pub struct TriangleReader<'a> {
+    data: TrianglesData<'a>,
+    format: VertexFormatInfo,
+    index_size: u64,
+    primitive_offset: u64,
+    first_vertex: u64,
+    pub primitive_count: u32,
+    pub transform: Option<Affine>,
+    location: Location,
+}
+
+impl<'a> TriangleReader<'a> {
+    /// Checks the geometry-level rules and reads the transform.
+    pub fn new(data: &TrianglesData<'a>, range: &BuildRangeInfo, location: Location) -> Result<Self> {
+        let format = vertex_format_info(data.vertex_format).ok_or_else(|| {
+            Error::vuid(
+                "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexFormat-03797",
+                location,
+                format!("vertexFormat {:?} is not supported for acceleration-structure vertex buffers", data.vertex_format),
+            )
+        })?;
+        let index_size = match data.index_type {
+            vk::IndexType::NONE_KHR => 0,
+            vk::IndexType::UINT16 => 2,
+            vk::IndexType::UINT32 => 4,
+            other => {
+                return Err(Error::vuid(
+                    "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-indexType-03798",
+                    location,
+                    format!("indexType {other:?} is not UINT16, UINT32 or NONE_KHR"),
+                ));
+            }
+        };
+        if data.vertex_stride % format.component_size as u64 != 0 {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexStride-03735",
+                location,
+                format!(
+                    "vertexStride {} is not a multiple of the component size {} of {:?}",
+                    data.vertex_stride, format.component_size, data.vertex_format
+                ),
+            ));
+        }
+        if data.vertex_stride > u32::MAX as u64 {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexStride-03819",
+                location,
+                format!("vertexStride {} is larger than 2^32-1", data.vertex_stride),
+            ));
+        }
+        if index_size == 0 && data.index_data.is_some() {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-indexData-parameter",
+                location,
+                "indexType is NONE_KHR but indexData is not NULL",
+            ));
+        }
+        if index_size != 0 && data.index_data.is_none() {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03772",
+                location,
+                "indexType is not NONE_KHR but indexData is NULL",
+            ));
+        }
+        let primitive_offset = range.primitive_offset as u64;
+        if index_size != 0 && primitive_offset % index_size != 0 {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03656",
+                location,
+                format!("primitiveOffset {} is not a multiple of the index size {index_size}", range.primitive_offset),
+            ));
+        }
+        if index_size == 0 && primitive_offset % format.offset_alignment() as u64 != 0 {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03657",
+                location,
+                format!(
+                    "primitiveOffset {} is not a multiple of the component size {} of {:?}",
+                    range.primitive_offset,
+                    format.offset_alignment(),
+                    data.vertex_format
+                ),
+            ));
+        }
+        let transform = match data.transform_data {
+            None => None,
+            Some(bytes) => {
+                if range.transform_offset % 16 != 0 {
+                    return Err(Error::vuid(
+                        "VUID-VkAccelerationStructureBuildRangeInfoKHR-transformOffset-03658",
+                        location,
+                        format!("transformOffset {} is not a multiple of 16", range.transform_offset),
+                    ));
+                }
+                Some(read_transform(bytes, range.transform_offset as u64).ok_or(Error::RangeTooShort {
+                    what: "transformData",
+                    needed: range.transform_offset as u64 + 48,
+                    available: bytes.len() as u64,
+                    location,
+                })?)
+            }
+        };
+        let first_vertex = range.first_vertex as u64;
+        if index_size == 0 && range.primitive_count > 0 {
+            // Non-indexed: the last vertex read is firstVertex + 3 * primitiveCount - 1.
+            let last = first_vertex + 3 * range.primitive_count as u64 - 1;
+            if last > data.max_vertex as u64 {
+                return Err(Error::vuid(
+                    "VUID-VkAccelerationStructureBuildRangeInfoKHR-None-10775",
+                    location,
+                    format!(
+                        "firstVertex {} + 3 * primitiveCount {} - 1 = {last} exceeds maxVertex {}",
+                        range.first_vertex, range.primitive_count, data.max_vertex
+                    ),
+                ));
+            }
+        }
+        Ok(TriangleReader {
+            data: *data,
+            format,
+            index_size,
+            primitive_offset,
+            first_vertex,
+            primitive_count: range.primitive_count,
+            transform,
+            location,
+        })
+    }
+
+    pub fn format(&self) -> VertexFormatInfo {
+        self.format
+    }
+
+    /// The three vertex indices of triangle `i`, `firstVertex` included.
+    #[inline]
+    pub fn vertex_indices(&self, i: u32) -> Result<[u64; 3]> {
+        let base = 3 * i as u64;
+        if self.index_size == 0 {
+            return Ok([base, base + 1, base + 2].map(|v| v + self.first_vertex));
+        }
+        let bytes = self.data.index_data.unwrap_or(&[]);
+        let mut out = [0u64; 3];
+        for (k, o) in out.iter_mut().enumerate() {
+            let at = self.primitive_offset + (base + k as u64) * self.index_size;
+            let raw = if self.index_size == 2 {
+                read_bytes::<2>(bytes, at).map(|b| u16::from_le_bytes(b) as u64)
+            } else {
+                read_bytes::<4>(bytes, at).map(|b| u32::from_le_bytes(b) as u64)
+            };
+            let raw = raw.ok_or(Error::RangeTooShort {
+                what: "indexData",
+                needed: at + self.index_size,
+                available: bytes.len() as u64,
+                location: self.location.primitive(i),
+            })?;
+            *o = raw + self.first_vertex;
+            if *o > self.data.max_vertex as u64 {
+                return Err(Error::vuid(
+                    "VUID-VkAccelerationStructureBuildRangeInfoKHR-maxVertex-10774",
+                    self.location.primitive(i),
+                    format!(
+                        "index {raw} + firstVertex {} = {} exceeds maxVertex {}",
+                        self.first_vertex, *o, self.data.max_vertex
+                    ),
+                ));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Vertex `v` (firstVertex already added) before the geometry transform.
+    #[inline]
+    pub fn vertex(&self, v: u64, primitive: u32) -> Result<Vec3> {
+        let base = if self.index_size == 0 { self.primitive_offset } else { 0 };
+        let at = base + v * self.data.vertex_stride;
+        let start = usize::try_from(at).unwrap_or(usize::MAX);
+        self.data.vertex_data.get(start..).and_then(|s| self.format.decode(s)).ok_or(Error::RangeTooShort {
+            what: "vertexData",
+            needed: at.saturating_add(self.format.size as u64),
+            available: self.data.vertex_data.len() as u64,
+            location: self.location.primitive(primitive),
+        })
+    }
+
+    /// Triangle `i` in the structure's space (geometry transform applied), in index order.
+    /// `None` for an inactive triangle: the X component of any vertex is NaN.
+    #[inline]
+    pub fn triangle(&self, i: u32) -> Result<Option<[Vec3; 3]>> {
+        let idx = self.vertex_indices(i)?;
+        let mut v = [[0f32; 3]; 3];
+        for k in 0..3 {
+            v[k] = self.vertex(idx[k], i)?;
+        }
+        if v.iter().any(|p| p[0].is_nan()) {
+            return Ok(None);
+        }
+        if let Some(t) = &self.transform {
+            v = v.map(|p| t.point(p));
+        }
+        Ok(Some(v))
+    }
+}

@@ -1,0 +1,49 @@
+//! The size plan: the one function that decides where each section goes for given maxima.
+//! `vkGetAccelerationStructureBuildSizesKHR` answers from it and the encoder writes by it, so the
+//! two cannot disagree.
+
+use super::{HEADER_SIZE, PrimKind, SECTION_ALIGN, align_up};
+
+/// Section offsets and sizes for a structure with at most `max_prims` primitives.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Plan {
+    pub geometries_offset: u64,
+    pub nodes_offset: u64,
+    pub prims_offset: u64,
+    pub prim_ids_offset: u64,
+    pub node_capacity: u64,
+    pub prim_capacity: u64,
+    pub total_size: u64,
+}
+
+/// Most nodes a tree over `n` primitives can need. Every inner node the builders make has all
+/// four children (an inner node is only made for more than three primitives, and a node is
+/// always filled before its children are considered), so `n` leaves need at most
+/// `(n - 1) / 3` inner nodes; one more for the root of an empty or one-leaf tree.
+pub fn max_nodes(n: u64) -> u64 {
+    (n.saturating_sub(1)).div_ceil(3).max(1)
+}
+
+impl Plan {
+    pub fn new(kind: PrimKind, geometry_count: u64, max_prims: u64) -> Plan {
+        let geometries_offset = HEADER_SIZE;
+        let nodes_offset = align_up(geometries_offset + 32 * geometry_count, SECTION_ALIGN);
+        let node_capacity = max_nodes(max_prims);
+        let prims_offset = align_up(nodes_offset + 128 * node_capacity, SECTION_ALIGN);
+        let prim_ids_offset = align_up(prims_offset + kind.prim_size() * max_prims, SECTION_ALIGN);
+        let total_size = align_up(prim_ids_offset + 4 * max_prims, SECTION_ALIGN);
+        Plan { geometries_offset, nodes_offset, prims_offset, prim_ids_offset, node_capacity, prim_capacity: max_prims, total_size }
+    }
+}
+
+/// Build scratch: a 32-byte `PrimRef` and an 8-byte sort key per primitive, plus slack to align
+/// them in whatever address the application gives.
+pub fn build_scratch_size(max_prims: u64) -> u64 {
+    align_up(40 * max_prims + 2 * SECTION_ALIGN, SECTION_ALIGN)
+}
+
+/// Update scratch: update works in place and needs only a little (never zero: the CTS asserts
+/// non-zero scratch sizes).
+pub fn update_scratch_size(_max_prims: u64) -> u64 {
+    SECTION_ALIGN
+}

@@ -1,0 +1,161 @@
+//! A validated, typed read-only view over a structure's bytes.
+//!
+//! [`View::parse`] checks every offset, count, child index and leaf range before anything is
+//! read, so traversal over a view never indexes out of bounds, loops or recurses without end,
+//! whatever the bytes are (memory the application scribbled on, or a structure that was
+//! created but never built).
+
+use super::{
+    EMPTY_CHILD, GeometryRecord, HEADER_SIZE, Header, InstanceRecord, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH,
+    MAX_LEAF_SIZE, Node, PrimKind,
+};
+
+#[derive(Clone, Copy, Debug)]
+pub struct View<'a> {
+    pub header: Header,
+    pub prim_kind: PrimKind,
+    pub geometries: &'a [GeometryRecord],
+    pub nodes: &'a [Node],
+    pub triangles: &'a [[f32; 9]],
+    pub aabbs: &'a [[f32; 6]],
+    pub instances: &'a [InstanceRecord],
+    pub prim_ids: &'a [u32],
+}
+
+fn section<'a, T: bytemuck::Pod>(bytes: &'a [u8], offset: u64, count: u64, what: &str) -> Result<&'a [T], String> {
+    let size = std::mem::size_of::<T>() as u64;
+    let end = count.checked_mul(size).and_then(|s| s.checked_add(offset)).ok_or(format!("{what} section overflows"))?;
+    if end > bytes.len() as u64 {
+        return Err(format!("{what} section ends at {end}, past the structure's {} bytes", bytes.len()));
+    }
+    bytemuck::try_cast_slice(&bytes[offset as usize..end as usize]).map_err(|e| format!("{what} section is misaligned: {e}"))
+}
+
+/// Reads just the header, unvalidated beyond magic and version.
+pub fn read_header(bytes: &[u8]) -> Result<Header, String> {
+    let raw = bytes.get(..HEADER_SIZE as usize).ok_or_else(|| format!("{} bytes is too short for a header", bytes.len()))?;
+    let header: Header = bytemuck::pod_read_unaligned(raw);
+    if header.magic != MAGIC {
+        return Err(format!("no hostas structure (magic {:#010x})", header.magic));
+    }
+    if header.version != LAYOUT_VERSION {
+        return Err(format!("layout version {} is not {LAYOUT_VERSION}", header.version));
+    }
+    Ok(header)
+}
+
+impl<'a> View<'a> {
+    pub fn parse(bytes: &'a [u8]) -> Result<View<'a>, String> {
+        let header = read_header(bytes)?;
+        let h = &header;
+        let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or(format!("unknown primitive kind {}", h.prim_kind))?;
+        if h.kind > 1 {
+            return Err(format!("unknown structure type {}", h.kind));
+        }
+        if (h.kind == 0) != (prim_kind == PrimKind::Instances) && prim_kind != PrimKind::None {
+            return Err("structure type and primitive kind disagree".into());
+        }
+        if h.used_size > bytes.len() as u64 {
+            return Err(format!("used size {} is larger than the {} bytes given", h.used_size, bytes.len()));
+        }
+        if h.stored_count > h.prim_capacity || h.node_count > h.node_capacity || h.stored_count > h.primitive_count {
+            return Err("counts exceed capacities".into());
+        }
+        let geometries: &[GeometryRecord] = section(bytes, h.geometries_offset, h.geometry_count as u64, "geometry")?;
+        let nodes: &[Node] = section(bytes, h.nodes_offset, h.node_count as u64, "node")?;
+        let stored = h.stored_count as u64;
+        let (mut triangles, mut aabbs, mut instances): (&[[f32; 9]], &[[f32; 6]], &[InstanceRecord]) = (&[], &[], &[]);
+        match prim_kind {
+            PrimKind::Triangles => triangles = section(bytes, h.prims_offset, stored, "triangle")?,
+            PrimKind::Aabbs => aabbs = section(bytes, h.prims_offset, stored, "AABB")?,
+            PrimKind::Instances => instances = section(bytes, h.prims_offset, stored, "instance")?,
+            PrimKind::None => {
+                if stored != 0 {
+                    return Err("primitives stored without geometry".into());
+                }
+            }
+        }
+        let prim_ids: &[u32] = section(bytes, h.prim_ids_offset, stored, "primitive id")?;
+
+        // Geometries: consecutive primitive ranges covering primitive_count.
+        let mut next = 0u64;
+        for (i, g) in geometries.iter().enumerate() {
+            if g.first_primitive as u64 != next {
+                return Err(format!("geometry {i} starts at primitive {} instead of {next}", g.first_primitive));
+            }
+            next += g.primitive_count as u64;
+        }
+        if next != h.primitive_count as u64 {
+            return Err("geometry primitive counts do not add up".into());
+        }
+        if let Some(bad) = prim_ids.iter().find(|&&id| id >= h.primitive_count) {
+            return Err(format!("primitive id {bad} out of range"));
+        }
+        if (stored > 0) != (h.node_count > 0) {
+            return Err("primitives without nodes or nodes without primitives".into());
+        }
+        // Nodes: children point forward (no cycles), leaves stay in range, depth is bounded.
+        let mut depth = vec![0u8; nodes.len()];
+        if !nodes.is_empty() {
+            depth[0] = 1;
+        }
+        for (i, n) in nodes.iter().enumerate() {
+            for k in 0..4 {
+                let c = n.child[k];
+                if c == EMPTY_CHILD {
+                    continue;
+                }
+                if c & LEAF_BIT != 0 {
+                    let first = (c & !LEAF_BIT) as u64;
+                    let count = n.count[k] as u64;
+                    if count == 0 || count > MAX_LEAF_SIZE as u64 || first + count > stored {
+                        return Err(format!("node {i} child {k}: leaf range {first}+{count} out of range"));
+                    }
+                } else {
+                    let c = c as usize;
+                    if c <= i || c >= nodes.len() {
+                        return Err(format!("node {i} child {k}: node index {c} invalid"));
+                    }
+                    if depth[c] != 0 {
+                        return Err(format!("node {c} has two parents"));
+                    }
+                    depth[c] = depth[i] + 1;
+                    if depth[c] as u32 > MAX_DEPTH {
+                        return Err(format!("tree deeper than {MAX_DEPTH}"));
+                    }
+                }
+            }
+        }
+        Ok(View { header, prim_kind, geometries, nodes, triangles, aabbs, instances, prim_ids })
+    }
+
+    /// The geometry that holds primitive sequence number `id`, and the primitive's index in it.
+    #[inline]
+    pub fn locate(&self, id: u32) -> (u32, u32) {
+        let g = self.geometries.partition_point(|g| g.first_primitive <= id).saturating_sub(1);
+        let first = self.geometries.get(g).map_or(0, |r| r.first_primitive);
+        (g as u32, id - first)
+    }
+}
+
+impl<'a> View<'a> {
+    /// Re-creates a view over bytes that [`View::parse`] accepted and that have not changed
+    /// since (the caller holds the memory's read lock): the section slices only, no walk.
+    pub fn reopen(bytes: &'a [u8]) -> Result<View<'a>, String> {
+        let header = read_header(bytes)?;
+        let h = &header;
+        let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or("unknown primitive kind")?;
+        let stored = h.stored_count as u64;
+        let geometries = section(bytes, h.geometries_offset, h.geometry_count as u64, "geometry")?;
+        let nodes = section(bytes, h.nodes_offset, h.node_count as u64, "node")?;
+        let (mut triangles, mut aabbs, mut instances): (&[[f32; 9]], &[[f32; 6]], &[InstanceRecord]) = (&[], &[], &[]);
+        match prim_kind {
+            PrimKind::Triangles => triangles = section(bytes, h.prims_offset, stored, "triangle")?,
+            PrimKind::Aabbs => aabbs = section(bytes, h.prims_offset, stored, "AABB")?,
+            PrimKind::Instances => instances = section(bytes, h.prims_offset, stored, "instance")?,
+            PrimKind::None => {}
+        }
+        let prim_ids = section(bytes, h.prim_ids_offset, stored, "primitive id")?;
+        Ok(View { header, prim_kind, geometries, nodes, triangles, aabbs, instances, prim_ids })
+    }
+}

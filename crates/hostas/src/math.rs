@@ -1,0 +1,159 @@
+//! Small vector, box and affine-transform types in the spec's conventions.
+
+use bytemuck::{Pod, Zeroable};
+
+pub type Vec3 = [f32; 3];
+
+#[inline(always)]
+pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+#[inline(always)]
+pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+#[inline(always)]
+pub fn dot(a: Vec3, b: Vec3) -> f32 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// An axis-aligned box; empty boxes have `lo > hi`.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Aabb {
+    pub lo: Vec3,
+    pub hi: Vec3,
+}
+
+impl Aabb {
+    pub const EMPTY: Aabb = Aabb { lo: [f32::INFINITY; 3], hi: [f32::NEG_INFINITY; 3] };
+
+    #[inline(always)]
+    pub fn point(p: Vec3) -> Self {
+        Aabb { lo: p, hi: p }
+    }
+    #[inline(always)]
+    pub fn grow(&mut self, p: Vec3) {
+        for k in 0..3 {
+            self.lo[k] = self.lo[k].min(p[k]);
+            self.hi[k] = self.hi[k].max(p[k]);
+        }
+    }
+    #[inline(always)]
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb {
+            lo: [self.lo[0].min(o.lo[0]), self.lo[1].min(o.lo[1]), self.lo[2].min(o.lo[2])],
+            hi: [self.hi[0].max(o.hi[0]), self.hi[1].max(o.hi[1]), self.hi[2].max(o.hi[2])],
+        }
+    }
+    pub fn is_empty(&self) -> bool {
+        !(self.lo[0] <= self.hi[0] && self.lo[1] <= self.hi[1] && self.lo[2] <= self.hi[2])
+    }
+    /// Half the surface area (the SAH only needs ratios).
+    #[inline(always)]
+    pub fn half_area(&self) -> f32 {
+        if self.is_empty() {
+            return 0.0;
+        }
+        let d = sub(self.hi, self.lo);
+        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+    #[inline(always)]
+    pub fn center2(&self) -> Vec3 {
+        [self.lo[0] + self.hi[0], self.lo[1] + self.hi[1], self.lo[2] + self.hi[2]]
+    }
+}
+
+/// `VkTransformMatrixKHR`: a row-major 3x4 matrix; columns 0..2 are the linear part, column 3
+/// the translation.
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[repr(C)]
+pub struct Affine {
+    pub m: [[f32; 4]; 3],
+}
+
+impl Affine {
+    pub const IDENTITY: Affine =
+        Affine { m: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] };
+
+    pub fn from_rows(r: [f32; 12]) -> Self {
+        Affine { m: [[r[0], r[1], r[2], r[3]], [r[4], r[5], r[6], r[7]], [r[8], r[9], r[10], r[11]]] }
+    }
+    pub fn to_rows(&self) -> [f32; 12] {
+        bytemuck::cast(self.m)
+    }
+    #[inline(always)]
+    pub fn point(&self, p: Vec3) -> Vec3 {
+        let m = &self.m;
+        [
+            m[0][0] * p[0] + m[0][1] * p[1] + m[0][2] * p[2] + m[0][3],
+            m[1][0] * p[0] + m[1][1] * p[1] + m[1][2] * p[2] + m[1][3],
+            m[2][0] * p[0] + m[2][1] * p[1] + m[2][2] * p[2] + m[2][3],
+        ]
+    }
+    #[inline(always)]
+    pub fn vector(&self, v: Vec3) -> Vec3 {
+        let m = &self.m;
+        [
+            m[0][0] * v[0] + m[0][1] * v[1] + m[0][2] * v[2],
+            m[1][0] * v[0] + m[1][1] * v[1] + m[1][2] * v[2],
+            m[2][0] * v[0] + m[2][1] * v[1] + m[2][2] * v[2],
+        ]
+    }
+    /// Determinant of the linear part, in f64.
+    pub fn determinant(&self) -> f64 {
+        let m = |r: usize, c: usize| self.m[r][c] as f64;
+        m(0, 0) * (m(1, 1) * m(2, 2) - m(1, 2) * m(2, 1)) - m(0, 1) * (m(1, 0) * m(2, 2) - m(1, 2) * m(2, 0))
+            + m(0, 2) * (m(1, 0) * m(2, 1) - m(1, 1) * m(2, 0))
+    }
+    /// The inverse, computed in f64; `None` when the linear part is singular or not finite.
+    pub fn inverse(&self) -> Option<Affine> {
+        let det = self.determinant();
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let m = |r: usize, c: usize| self.m[r][c] as f64;
+        let inv_det = 1.0 / det;
+        let mut l = [[0f64; 3]; 3];
+        l[0][0] = (m(1, 1) * m(2, 2) - m(1, 2) * m(2, 1)) * inv_det;
+        l[0][1] = (m(0, 2) * m(2, 1) - m(0, 1) * m(2, 2)) * inv_det;
+        l[0][2] = (m(0, 1) * m(1, 2) - m(0, 2) * m(1, 1)) * inv_det;
+        l[1][0] = (m(1, 2) * m(2, 0) - m(1, 0) * m(2, 2)) * inv_det;
+        l[1][1] = (m(0, 0) * m(2, 2) - m(0, 2) * m(2, 0)) * inv_det;
+        l[1][2] = (m(0, 2) * m(1, 0) - m(0, 0) * m(1, 2)) * inv_det;
+        l[2][0] = (m(1, 0) * m(2, 1) - m(1, 1) * m(2, 0)) * inv_det;
+        l[2][1] = (m(0, 1) * m(2, 0) - m(0, 0) * m(2, 1)) * inv_det;
+        l[2][2] = (m(0, 0) * m(1, 1) - m(0, 1) * m(1, 0)) * inv_det;
+        let t = [m(0, 3), m(1, 3), m(2, 3)];
+        let mut out = Affine::IDENTITY;
+        for r in 0..3 {
+            for c in 0..3 {
+                out.m[r][c] = l[r][c] as f32;
+            }
+            out.m[r][3] = -(l[r][0] * t[0] + l[r][1] * t[1] + l[r][2] * t[2]) as f32;
+        }
+        out.m.iter().flatten().all(|v| v.is_finite()).then_some(out)
+    }
+    /// The box that contains this transform applied to `b`.
+    pub fn transform_aabb(&self, b: &Aabb) -> Aabb {
+        if b.is_empty() {
+            return Aabb::EMPTY;
+        }
+        let mut out = Aabb::EMPTY;
+        for i in 0..8 {
+            let p = [
+                if i & 1 == 0 { b.lo[0] } else { b.hi[0] },
+                if i & 2 == 0 { b.lo[1] } else { b.hi[1] },
+                if i & 4 == 0 { b.lo[2] } else { b.hi[2] },
+            ];
+            out.grow(self.point(p));
+        }
+        // Widen by a few ulps so that rounding in the corner products never loses a hit.
+        for k in 0..3 {
+            let pad = (out.hi[k] - out.lo[k]).abs().max(out.lo[k].abs()).max(out.hi[k].abs()) * 4.0 * f32::EPSILON;
+            out.lo[k] -= pad;
+            out.hi[k] += pad;
+        }
+        out
+    }
+}

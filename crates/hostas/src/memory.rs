@@ -1,0 +1,116 @@
+//! Host memory and buffers: where acceleration structures live.
+//!
+//! A [`Buffer`] is the `VkBuffer` an acceleration structure is created in; its memory may be
+//! bound after the structure is created (as in Vulkan). Memory is 64-byte aligned so that the
+//! layout's sections can be viewed as typed slices. The application reads and writes buffer
+//! memory with [`Buffer::read`] and [`Buffer::write`], as it would through a mapping.
+
+use crate::error::{Error, Result};
+use bytemuck::{Pod, Zeroable};
+use parking_lot::{Mutex, RwLock};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+#[derive(Clone, Copy, Pod, Zeroable)]
+#[repr(C, align(64))]
+pub(crate) struct Block([u8; 64]);
+
+/// Bound host memory.
+pub struct HostMemory {
+    blocks: Vec<Block>,
+    len: usize,
+}
+
+impl HostMemory {
+    fn new(len: usize) -> Result<HostMemory> {
+        let n = len.div_ceil(64);
+        let mut blocks = Vec::new();
+        blocks.try_reserve_exact(n).map_err(|e| Error::OutOfHostMemory(format!("{len} bytes: {e}")))?;
+        blocks.resize(n, Block([0; 64]));
+        Ok(HostMemory { blocks, len })
+    }
+    pub fn bytes(&self) -> &[u8] {
+        &bytemuck::cast_slice(&self.blocks)[..self.len]
+    }
+    pub fn bytes_mut(&mut self) -> &mut [u8] {
+        &mut bytemuck::cast_slice_mut(&mut self.blocks)[..self.len]
+    }
+}
+
+pub(crate) type MemoryRef = Arc<RwLock<HostMemory>>;
+
+static NEXT_BUFFER_ID: AtomicU64 = AtomicU64::new(1);
+
+struct BufferInner {
+    id: u64,
+    size: u64,
+    memory: Mutex<Option<MemoryRef>>,
+}
+
+/// A buffer that acceleration structures are placed in (`VkBuffer` with
+/// `ACCELERATION_STRUCTURE_STORAGE` usage, bound to host-visible memory).
+#[derive(Clone)]
+pub struct Buffer {
+    inner: Arc<BufferInner>,
+}
+
+impl std::fmt::Debug for Buffer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Buffer").field("id", &self.inner.id).field("size", &self.inner.size).finish()
+    }
+}
+
+impl Buffer {
+    /// A buffer of `size` bytes with no memory bound yet.
+    pub fn new_unbound(size: u64) -> Buffer {
+        Buffer { inner: Arc::new(BufferInner { id: NEXT_BUFFER_ID.fetch_add(1, Ordering::Relaxed), size, memory: Mutex::new(None) }) }
+    }
+    /// A buffer of `size` bytes with fresh host memory bound.
+    pub fn new(size: u64) -> Result<Buffer> {
+        let b = Buffer::new_unbound(size);
+        b.bind_memory()?;
+        Ok(b)
+    }
+    /// Binds fresh host memory (`vkBindBufferMemory`). Binding twice is an error.
+    pub fn bind_memory(&self) -> Result<()> {
+        let mut m = self.inner.memory.lock();
+        if m.is_some() {
+            return Err(Error::vuid("VUID-vkBindBufferMemory-buffer-07459", Default::default(), "buffer already has memory bound"));
+        }
+        let len = usize::try_from(self.inner.size).map_err(|_| Error::OutOfHostMemory(format!("{} bytes", self.inner.size)))?;
+        *m = Some(Arc::new(RwLock::new(HostMemory::new(len)?)));
+        Ok(())
+    }
+    pub fn size(&self) -> u64 {
+        self.inner.size
+    }
+    pub fn id(&self) -> u64 {
+        self.inner.id
+    }
+    pub(crate) fn memory(&self) -> Option<MemoryRef> {
+        self.inner.memory.lock().clone()
+    }
+    fn range(&self, offset: u64, len: usize) -> Result<std::ops::Range<usize>> {
+        let end = offset.checked_add(len as u64).filter(|&e| e <= self.inner.size);
+        match end {
+            Some(e) => Ok(offset as usize..e as usize),
+            None => Err(Error::RangeTooShort { what: "buffer", needed: offset.saturating_add(len as u64), available: self.inner.size, location: Default::default() }),
+        }
+    }
+    /// Copies bytes out of the buffer's memory.
+    pub fn read(&self, offset: u64, out: &mut [u8]) -> Result<()> {
+        let mem = self.memory().ok_or_else(|| Error::NotSupported("buffer has no memory bound".into()))?;
+        let r = self.range(offset, out.len())?;
+        let guard = mem.try_read().ok_or(Error::InUse { handle: self.inner.id })?;
+        out.copy_from_slice(&guard.bytes()[r]);
+        Ok(())
+    }
+    /// Copies bytes into the buffer's memory.
+    pub fn write(&self, offset: u64, data: &[u8]) -> Result<()> {
+        let mem = self.memory().ok_or_else(|| Error::NotSupported("buffer has no memory bound".into()))?;
+        let r = self.range(offset, data.len())?;
+        let mut guard = mem.try_write().ok_or(Error::InUse { handle: self.inner.id })?;
+        guard.bytes_mut()[r].copy_from_slice(data);
+        Ok(())
+    }
+}

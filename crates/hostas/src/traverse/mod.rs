@@ -1,0 +1,109 @@
+//! Ray traversal with the semantics of `GL_EXT_ray_query` / `SPV_KHR_ray_query`.
+//!
+//! [`RayQuery`] is the state machine (initialize, proceed, confirm, generate, terminate and the
+//! getters); [`Scene`] holds the memory of a top-level structure and every bottom-level
+//! structure its instances reference, locked for reading while rays are traced, and offers
+//! batch calls for closest-hit and any-hit tracing.
+
+mod query;
+mod scene;
+pub mod triangle;
+
+pub use query::{CandidateType, CommittedType, Intersection, RayQuery};
+pub use scene::{Hit, HitKind, Scene};
+
+use crate::error::{Error, Location, Result};
+use crate::math::Vec3;
+
+/// SPIR-V `RayFlags` (`gl_RayFlags*EXT`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct RayFlags(pub u32);
+
+impl RayFlags {
+    pub const NONE: RayFlags = RayFlags(0);
+    pub const OPAQUE: RayFlags = RayFlags(0x1);
+    pub const NO_OPAQUE: RayFlags = RayFlags(0x2);
+    pub const TERMINATE_ON_FIRST_HIT: RayFlags = RayFlags(0x4);
+    pub const SKIP_CLOSEST_HIT_SHADER: RayFlags = RayFlags(0x8);
+    pub const CULL_BACK_FACING_TRIANGLES: RayFlags = RayFlags(0x10);
+    pub const CULL_FRONT_FACING_TRIANGLES: RayFlags = RayFlags(0x20);
+    pub const CULL_OPAQUE: RayFlags = RayFlags(0x40);
+    pub const CULL_NO_OPAQUE: RayFlags = RayFlags(0x80);
+    pub const SKIP_TRIANGLES: RayFlags = RayFlags(0x100);
+    pub const SKIP_AABBS: RayFlags = RayFlags(0x200);
+    pub const FORCE_OPACITY_MICROMAP_2_STATE: RayFlags = RayFlags(0x400);
+
+    pub const fn empty() -> RayFlags {
+        RayFlags(0)
+    }
+    #[inline(always)]
+    pub const fn contains(self, other: RayFlags) -> bool {
+        self.0 & other.0 == other.0
+    }
+    #[inline(always)]
+    pub const fn intersects(self, other: RayFlags) -> bool {
+        self.0 & other.0 != 0
+    }
+}
+
+impl std::ops::BitOr for RayFlags {
+    type Output = RayFlags;
+    fn bitor(self, rhs: RayFlags) -> RayFlags {
+        RayFlags(self.0 | rhs.0)
+    }
+}
+
+/// A ray as `rayQueryInitializeEXT` takes it: `t` is measured along the unnormalized
+/// direction, in every space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub t_min: f32,
+    pub direction: Vec3,
+    pub t_max: f32,
+    pub flags: RayFlags,
+    /// Only the low 8 bits are used.
+    pub cull_mask: u32,
+}
+
+impl Ray {
+    pub fn new(origin: Vec3, direction: Vec3) -> Ray {
+        Ray { origin, t_min: 0.0, direction, t_max: f32::INFINITY, flags: RayFlags::NONE, cull_mask: 0xff }
+    }
+
+    /// The runtime rules of `OpRayQueryInitializeKHR` (VUID-RuntimeSpirv-OpRayQueryInitializeKHR-*).
+    pub fn validate(&self) -> Result<()> {
+        let bad = |vuid: &'static str, msg: &str| Err(Error::vuid(vuid, Location::NONE, msg));
+        if !self.origin.iter().all(|v| v.is_finite()) || !self.direction.iter().all(|v| v.is_finite()) {
+            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06348", "ray origin and direction must be finite");
+        }
+        if self.t_min.is_nan() || self.t_max.is_nan() {
+            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06351", "tMin and tMax must not be NaN");
+        }
+        if !(self.t_min >= 0.0 && self.t_max >= 0.0) {
+            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06349", "tMin and tMax must be non-negative");
+        }
+        if self.t_min > self.t_max {
+            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06350", "tMin must be less than or equal to tMax");
+        }
+        let f = self.flags;
+        if f.contains(RayFlags::SKIP_TRIANGLES | RayFlags::SKIP_AABBS) {
+            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06889", "SkipTriangles and SkipAABBs must not both be set");
+        }
+        let cull = [RayFlags::SKIP_TRIANGLES, RayFlags::CULL_BACK_FACING_TRIANGLES, RayFlags::CULL_FRONT_FACING_TRIANGLES];
+        if cull.iter().filter(|&&c| f.contains(c)).count() > 1 {
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06890",
+                "at most one of SkipTriangles, CullBackFacingTriangles and CullFrontFacingTriangles may be set",
+            );
+        }
+        let opacity = [RayFlags::OPAQUE, RayFlags::NO_OPAQUE, RayFlags::CULL_OPAQUE, RayFlags::CULL_NO_OPAQUE];
+        if opacity.iter().filter(|&&c| f.contains(c)).count() > 1 {
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06891",
+                "at most one of Opaque, NoOpaque, CullOpaque and CullNoOpaque may be set",
+            );
+        }
+        Ok(())
+    }
+}

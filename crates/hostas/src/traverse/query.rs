@@ -1,0 +1,560 @@
+//! The ray-query state machine and the traversal loop behind it.
+//!
+//! Traversal is an explicit, resumable loop: `proceed` runs until it meets a candidate the
+//! application must decide on (a non-opaque triangle or any AABB), returns `true` with the
+//! state kept in the query, and continues from there on the next call. Opaque triangles are
+//! committed inside `proceed`, as the spec says. The stacks have a fixed capacity derived from
+//! the layout's depth bound.
+
+use super::scene::Scene;
+use super::triangle::ShearedRay;
+use super::{Ray, RayFlags};
+use crate::error::{Error, Location, Result};
+use crate::layout::view::View;
+use crate::layout::{EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind};
+use crate::math::{Affine, Vec3};
+use ash::vk;
+
+/// `RayQueryCommittedIntersectionTypeKHR`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum CommittedType {
+    None = 0,
+    Triangle = 1,
+    Generated = 2,
+}
+
+/// `RayQueryCandidateIntersectionTypeKHR`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum CandidateType {
+    Triangle = 0,
+    Aabb = 1,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    None,
+    Triangle,
+    Aabb,
+    Generated,
+}
+
+/// One intersection: a candidate or the committed one, with everything the getters return.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intersection {
+    kind: Kind,
+    /// Hit distance (triangles, generated hits). For an AABB candidate, the distance at which
+    /// the ray enters the box (clamped to tMin): a hint, the spec leaves it undefined.
+    pub t: f32,
+    /// `InstanceId`: index in the instance array, inactive instances counted.
+    pub instance_id: u32,
+    pub instance_custom_index: u32,
+    pub sbt_record_offset: u32,
+    pub geometry_index: u32,
+    /// `PrimitiveId`: index within the geometry's range, inactive primitives counted.
+    pub primitive_index: u32,
+    /// Weights of vertices 1 and 2 (triangles).
+    pub barycentrics: [f32; 2],
+    pub front_face: bool,
+    /// The opacity decided for this candidate (`OpRayQueryGetIntersectionCandidateAABBOpaqueKHR`).
+    pub opaque: bool,
+    instance_slot: u32,
+    prim_slot: u32,
+}
+
+impl Intersection {
+    const NONE: Intersection = Intersection {
+        kind: Kind::None,
+        t: 0.0,
+        instance_id: 0,
+        instance_custom_index: 0,
+        sbt_record_offset: 0,
+        geometry_index: 0,
+        primitive_index: 0,
+        barycentrics: [0.0; 2],
+        front_face: false,
+        opaque: false,
+        instance_slot: 0,
+        prim_slot: 0,
+    };
+    pub fn committed_type(&self) -> CommittedType {
+        match self.kind {
+            Kind::Triangle => CommittedType::Triangle,
+            Kind::Generated => CommittedType::Generated,
+            _ => CommittedType::None,
+        }
+    }
+    pub fn candidate_type(&self) -> Option<CandidateType> {
+        match self.kind {
+            Kind::Triangle => Some(CandidateType::Triangle),
+            Kind::Aabb => Some(CandidateType::Aabb),
+            _ => None,
+        }
+    }
+}
+
+const STACK_CAPACITY: usize = 3 * MAX_DEPTH as usize + 4;
+
+#[derive(Clone, Copy, Default)]
+struct Entry {
+    child: u32,
+    count: u32,
+    t: f32,
+}
+
+struct Stack {
+    items: [Entry; STACK_CAPACITY],
+    len: usize,
+}
+
+impl Stack {
+    fn new() -> Box<Stack> {
+        Box::new(Stack { items: [Entry::default(); STACK_CAPACITY], len: 0 })
+    }
+    #[inline(always)]
+    fn push(&mut self, e: Entry) {
+        // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
+        if let Some(slot) = self.items.get_mut(self.len) {
+            *slot = e;
+            self.len += 1;
+        }
+    }
+    #[inline(always)]
+    fn pop(&mut self) -> Option<Entry> {
+        if self.len == 0 {
+            return None;
+        }
+        self.len -= 1;
+        Some(self.items[self.len])
+    }
+}
+
+/// 1 + 2 * gamma(3): widens the slab test's far distance so that rounding never loses a hit
+/// (Ize, "Robust BVH Ray Traversal", JCGT 2013).
+const ROBUST_FAR: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+#[derive(Clone, Copy)]
+struct BoxRay {
+    origin: Vec3,
+    inv: Vec3,
+}
+
+impl BoxRay {
+    fn new(origin: Vec3, dir: Vec3) -> BoxRay {
+        // A zero component gives a huge finite inverse, not infinity, so that a ray lying in a
+        // slab's plane computes 0 * x = 0 instead of 0 * inf = NaN.
+        let inv = dir.map(|d| if d == 0.0 { f32::MAX.copysign(d) } else { 1.0 / d });
+        BoxRay { origin, inv }
+    }
+
+    /// Entry distances of the four children of `node`; `f32::INFINITY` where the segment
+    /// `[t_min, t_max]` misses (inclusive at both ends).
+    #[inline(always)]
+    fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; 4] {
+        let mut out = [f32::INFINITY; 4];
+        for k in 0..4 {
+            let x0 = (n.lo_x[k] - self.origin[0]) * self.inv[0];
+            let x1 = (n.hi_x[k] - self.origin[0]) * self.inv[0];
+            let y0 = (n.lo_y[k] - self.origin[1]) * self.inv[1];
+            let y1 = (n.hi_y[k] - self.origin[1]) * self.inv[1];
+            let z0 = (n.lo_z[k] - self.origin[2]) * self.inv[2];
+            let z1 = (n.hi_z[k] - self.origin[2]) * self.inv[2];
+            let near = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(t_min);
+            let far = (x0.max(x1).min(y0.max(y1)).min(z0.max(z1)) * ROBUST_FAR).min(t_max);
+            out[k] = if near <= far { near } else { f32::INFINITY };
+        }
+        out
+    }
+
+    #[inline(always)]
+    fn aabb(&self, b: &[f32; 6], t_min: f32, t_max: f32) -> Option<f32> {
+        let mut near = t_min;
+        let mut far = f32::INFINITY;
+        for k in 0..3 {
+            let t0 = (b[k] - self.origin[k]) * self.inv[k];
+            let t1 = (b[k + 3] - self.origin[k]) * self.inv[k];
+            near = near.max(t0.min(t1));
+            far = far.min(t0.max(t1));
+        }
+        (near <= (far * ROBUST_FAR).min(t_max)).then_some(near)
+    }
+}
+
+/// Traversal state of one structure (the top level or the current instance's bottom level).
+struct Level<'s> {
+    view: View<'s>,
+    ray: BoxRay,
+    stack: Box<Stack>,
+    leaf_next: u32,
+    leaf_end: u32,
+}
+
+impl<'s> Level<'s> {
+    fn new(view: View<'s>, ray: BoxRay, stack: Box<Stack>) -> Level<'s> {
+        let mut level = Level { view, ray, stack, leaf_next: 0, leaf_end: 0 };
+        level.stack.len = 0;
+        if !level.view.nodes.is_empty() {
+            level.stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
+        }
+        level
+    }
+
+    /// Advances to the next leaf that the segment reaches; `false` when the tree is done.
+    #[inline(always)]
+    fn next_leaf(&mut self, t_min: f32, t_max: f32) -> bool {
+        while let Some(e) = self.stack.pop() {
+            if e.t > t_max {
+                continue;
+            }
+            if e.child & LEAF_BIT != 0 {
+                self.leaf_next = e.child & !LEAF_BIT;
+                self.leaf_end = self.leaf_next + e.count;
+                return true;
+            }
+            let Some(node) = self.view.nodes.get(e.child as usize) else { continue };
+            let t = self.ray.node(node, t_min, t_max);
+            // Push hit children farthest first, so the nearest is popped next.
+            let mut order = [0usize, 1, 2, 3];
+            order.sort_unstable_by(|&a, &b| t[b].total_cmp(&t[a]));
+            for k in order {
+                if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
+                    self.stack.push(Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] });
+                }
+            }
+        }
+        false
+    }
+}
+
+struct Bottom<'s> {
+    level: Level<'s>,
+    sheared: ShearedRay,
+    instance: &'s InstanceRecord,
+    instance_slot: u32,
+}
+
+/// A ray query (`rayQueryEXT`) over a [`Scene`].
+pub struct RayQuery<'s> {
+    scene: &'s Scene,
+    ray: Ray,
+    top: Option<Level<'s>>,
+    bottom: Option<Bottom<'s>>,
+    spare_stack: Option<Box<Stack>>,
+    done: bool,
+    t_max: f32,
+    committed: Intersection,
+    candidate: Intersection,
+}
+
+impl<'s> RayQuery<'s> {
+    /// `rayQueryInitializeEXT`.
+    pub fn new(scene: &'s Scene, ray: &Ray) -> Result<RayQuery<'s>> {
+        ray.validate()?;
+        let top = scene.tlas_view().map(|v| Level::new(v, BoxRay::new(ray.origin, ray.direction), Stack::new()));
+        Ok(RayQuery {
+            scene,
+            ray: *ray,
+            top,
+            bottom: None,
+            spare_stack: Some(Stack::new()),
+            done: false,
+            t_max: ray.t_max,
+            committed: Intersection::NONE,
+            candidate: Intersection::NONE,
+        })
+    }
+
+    pub fn ray(&self) -> &Ray {
+        &self.ray
+    }
+
+    /// `rayQueryProceedEXT`: `true` when a candidate awaits a decision.
+    pub fn proceed(&mut self) -> bool {
+        self.candidate = Intersection::NONE;
+        if self.done {
+            return false;
+        }
+        while let Some(c) = self.next_candidate() {
+            if c.kind == Kind::Triangle && c.opaque {
+                self.commit(c);
+                if self.done {
+                    return false;
+                }
+                continue;
+            }
+            self.candidate = c;
+            return true;
+        }
+        self.done = true;
+        false
+    }
+
+    fn commit(&mut self, c: Intersection) {
+        self.committed = c;
+        self.t_max = c.t;
+        if self.ray.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT) {
+            self.done = true;
+        }
+    }
+
+    /// `rayQueryConfirmIntersectionEXT`: commits the current triangle candidate.
+    pub fn confirm_intersection(&mut self) -> Result<()> {
+        if self.candidate.kind != Kind::Triangle {
+            return Err(Error::vuid(
+                "VUID-RuntimeSpirv-OpRayQueryConfirmIntersectionKHR",
+                Location::NONE,
+                "confirm needs a current triangle candidate",
+            ));
+        }
+        let c = self.candidate;
+        if c.t < self.t_max {
+            self.commit(c);
+        }
+        self.candidate.kind = Kind::None;
+        Ok(())
+    }
+
+    /// `rayQueryGenerateIntersectionEXT`: commits a hit at `t` for the current AABB candidate.
+    pub fn generate_intersection(&mut self, t: f32) -> Result<()> {
+        if self.candidate.kind != Kind::Aabb {
+            return Err(Error::vuid(
+                "VUID-RuntimeSpirv-OpRayQueryGenerateIntersectionKHR",
+                Location::NONE,
+                "generate needs a current AABB candidate",
+            ));
+        }
+        if !(self.ray.t_min <= t && t <= self.t_max) {
+            return Err(Error::vuid(
+                "VUID-RuntimeSpirv-OpRayQueryGenerateIntersectionKHR-06353",
+                Location::NONE,
+                format!("hitT {t} is outside [tMin {}, committed t {}]", self.ray.t_min, self.t_max),
+            ));
+        }
+        let mut c = self.candidate;
+        c.kind = Kind::Generated;
+        c.t = t;
+        self.commit(c);
+        self.candidate.kind = Kind::None;
+        Ok(())
+    }
+
+    /// `rayQueryTerminateEXT`.
+    pub fn terminate(&mut self) {
+        self.done = true;
+        self.candidate = Intersection::NONE;
+    }
+
+    /// The current candidate (valid after `proceed` returned `true`).
+    pub fn candidate(&self) -> &Intersection {
+        &self.candidate
+    }
+    /// `rayQueryGetIntersectionTypeEXT(q, false)`.
+    pub fn candidate_type(&self) -> Option<CandidateType> {
+        self.candidate.candidate_type()
+    }
+    pub fn committed(&self) -> &Intersection {
+        &self.committed
+    }
+    /// `rayQueryGetIntersectionTypeEXT(q, true)`.
+    pub fn committed_type(&self) -> CommittedType {
+        self.committed.committed_type()
+    }
+
+    fn pick(&self, committed: bool) -> Option<&Intersection> {
+        let i = if committed { &self.committed } else { &self.candidate };
+        (i.kind != Kind::None).then_some(i)
+    }
+
+    fn instance_of(&self, i: &Intersection) -> Option<&'s InstanceRecord> {
+        self.scene.tlas_view()?.instances.get(i.instance_slot as usize)
+    }
+
+    /// `rayQueryGetIntersectionObjectToWorldEXT` (3x4, row-major).
+    pub fn object_to_world(&self, committed: bool) -> Option<Affine> {
+        let i = self.pick(committed)?;
+        Some(Affine::from_rows(self.instance_of(i)?.object_to_world))
+    }
+    /// `rayQueryGetIntersectionWorldToObjectEXT` (3x4, row-major).
+    pub fn world_to_object(&self, committed: bool) -> Option<Affine> {
+        let i = self.pick(committed)?;
+        Some(Affine::from_rows(self.instance_of(i)?.world_to_object))
+    }
+    /// `rayQueryGetIntersectionObjectRayOriginEXT`.
+    pub fn object_ray_origin(&self, committed: bool) -> Option<Vec3> {
+        Some(self.world_to_object(committed)?.point(self.ray.origin))
+    }
+    /// `rayQueryGetIntersectionObjectRayDirectionEXT`.
+    pub fn object_ray_direction(&self, committed: bool) -> Option<Vec3> {
+        Some(self.world_to_object(committed)?.vector(self.ray.direction))
+    }
+
+    /// `rayQueryGetIntersectionTriangleVertexPositionsEXT`: the triangle's vertices in object
+    /// space after the geometry transform, in index order. Needs `ALLOW_DATA_ACCESS`.
+    pub fn triangle_vertex_positions(&self, committed: bool) -> Result<[Vec3; 3]> {
+        let none = || Error::vuid("VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR", Location::NONE, "no triangle intersection");
+        let i = self.pick(committed).ok_or_else(none)?;
+        if !matches!(i.kind, Kind::Triangle) {
+            return Err(none());
+        }
+        let inst = self.instance_of(i).ok_or_else(none)?;
+        let view = self.scene.blas_view_for(i.instance_slot).ok_or_else(none)?;
+        if view.header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw() == 0 {
+            return Err(Error::vuid(
+                "VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR-08761",
+                Location::NONE,
+                "the bottom-level structure was not built with ALLOW_DATA_ACCESS",
+            ));
+        }
+        let _ = inst;
+        let t = view.triangles.get(i.prim_slot as usize).ok_or_else(none)?;
+        Ok([[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]])
+    }
+
+    /// The next candidate that passes the range, culling and masking rules.
+    fn next_candidate(&mut self) -> Option<Intersection> {
+        let flags = self.ray.flags;
+        loop {
+            if let Some(bottom) = &mut self.bottom {
+                let level = &mut bottom.level;
+                while level.leaf_next < level.leaf_end {
+                    let slot = level.leaf_next;
+                    level.leaf_next += 1;
+                    let c = match level.view.prim_kind {
+                        PrimKind::Triangles => test_triangle(&self.ray, self.t_max, bottom.instance, bottom.instance_slot, &level.view, &bottom.sheared, slot),
+                        PrimKind::Aabbs => test_aabb(&self.ray, self.t_max, bottom.instance, bottom.instance_slot, &level.view, &level.ray, slot),
+                        _ => None,
+                    };
+                    if c.is_some() {
+                        return c;
+                    }
+                }
+                if !level.next_leaf(self.ray.t_min, self.t_max) {
+                    let b = self.bottom.take();
+                    self.spare_stack = b.map(|b| b.level.stack);
+                }
+                continue;
+            }
+            let top = self.top.as_mut()?;
+            while top.leaf_next < top.leaf_end {
+                let slot = top.leaf_next;
+                top.leaf_next += 1;
+                let Some(inst) = top.view.instances.get(slot as usize) else { continue };
+                if inst.mask & self.ray.cull_mask & 0xff == 0 {
+                    continue;
+                }
+                let Some(view) = self.scene.blas_view_for(slot) else { continue };
+                let skip = match view.prim_kind {
+                    PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
+                    PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
+                    _ => true,
+                };
+                if skip || view.nodes.is_empty() {
+                    continue;
+                }
+                let w2o = Affine::from_rows(inst.world_to_object);
+                let origin = w2o.point(self.ray.origin);
+                let dir = w2o.vector(self.ray.direction);
+                let stack = self.spare_stack.take().unwrap_or_else(Stack::new);
+                self.bottom = Some(Bottom {
+                    level: Level::new(view, BoxRay::new(origin, dir), stack),
+                    sheared: ShearedRay::new(origin, dir),
+                    instance: inst,
+                    instance_slot: slot,
+                });
+                break;
+            }
+            if self.bottom.is_some() {
+                continue;
+            }
+            if !top.next_leaf(self.ray.t_min, self.t_max) {
+                return None;
+            }
+        }
+    }
+}
+
+/// Opacity in the spec's order: geometry flag, then instance force flags, then ray flags.
+#[inline(always)]
+fn resolve_opacity(view: &View, geometry: u32, instance: &InstanceRecord, ray: RayFlags) -> bool {
+    let mut opaque = if view.header.header_flags & HEADER_ALL_OPAQUE != 0 {
+        true
+    } else if view.header.header_flags & HEADER_NONE_OPAQUE != 0 {
+        false
+    } else {
+        view.geometries.get(geometry as usize).is_some_and(|g| g.flags & vk::GeometryFlagsKHR::OPAQUE.as_raw() != 0)
+    };
+    let f = vk::GeometryInstanceFlagsKHR::from_raw(instance.flags);
+    if f.contains(vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE) {
+        opaque = true;
+    } else if f.contains(vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE) {
+        opaque = false;
+    }
+    if ray.contains(RayFlags::OPAQUE) {
+        opaque = true;
+    } else if ray.contains(RayFlags::NO_OPAQUE) {
+        opaque = false;
+    }
+    opaque
+}
+
+#[inline(always)]
+fn opacity_culled(opaque: bool, ray: RayFlags) -> bool {
+    (opaque && ray.contains(RayFlags::CULL_OPAQUE)) || (!opaque && ray.contains(RayFlags::CULL_NO_OPAQUE))
+}
+
+fn intersection(instance: &InstanceRecord, instance_slot: u32, view: &View, slot: u32, kind: Kind, t: f32) -> Intersection {
+    let id = view.prim_ids.get(slot as usize).copied().unwrap_or(0);
+    let (geometry_index, primitive_index) = view.locate(id);
+    Intersection {
+        kind,
+        t,
+        instance_id: instance.instance_id,
+        instance_custom_index: instance.custom_index,
+        sbt_record_offset: instance.sbt_record_offset,
+        geometry_index,
+        primitive_index,
+        barycentrics: [0.0; 2],
+        front_face: false,
+        opaque: false,
+        instance_slot,
+        prim_slot: slot,
+    }
+}
+
+#[inline(always)]
+fn test_triangle(ray: &Ray, t_max: f32, inst: &InstanceRecord, inst_slot: u32, view: &View, sheared: &ShearedRay, slot: u32) -> Option<Intersection> {
+    let tri = view.triangles.get(slot as usize)?;
+    let h = sheared.intersect(tri)?;
+    if !(h.t > ray.t_min && h.t < t_max) {
+        return None;
+    }
+    let f = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
+    let front = h.front_face != f.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING);
+    if !f.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE)
+        && ((front && ray.flags.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES))
+            || (!front && ray.flags.contains(RayFlags::CULL_BACK_FACING_TRIANGLES)))
+    {
+        return None;
+    }
+    let mut c = intersection(inst, inst_slot, view, slot, Kind::Triangle, h.t);
+    c.opaque = resolve_opacity(view, c.geometry_index, inst, ray.flags);
+    if opacity_culled(c.opaque, ray.flags) {
+        return None;
+    }
+    c.barycentrics = [h.b, h.c];
+    c.front_face = front;
+    Some(c)
+}
+
+#[inline(always)]
+fn test_aabb(ray: &Ray, t_max: f32, inst: &InstanceRecord, inst_slot: u32, view: &View, box_ray: &BoxRay, slot: u32) -> Option<Intersection> {
+    let b = view.aabbs.get(slot as usize)?;
+    let t = box_ray.aabb(b, ray.t_min, t_max)?;
+    let mut c = intersection(inst, inst_slot, view, slot, Kind::Aabb, t);
+    c.opaque = resolve_opacity(view, c.geometry_index, inst, ray.flags);
+    if opacity_culled(c.opaque, ray.flags) {
+        return None;
+    }
+    Some(c)
+}

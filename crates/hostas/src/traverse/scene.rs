@@ -1,0 +1,223 @@
+//! A scene: a top-level structure and the bottom-level structures its instances reference,
+//! with their memory read-locked and their bytes validated, ready for tracing. BLAS contents
+//! are reached through the instance references, so a BLAS updated in place under a built TLAS
+//! is traced as it is now.
+
+use super::query::{CommittedType, RayQuery};
+use super::{Ray, RayFlags};
+use crate::device::{AccelerationStructure, Device};
+use crate::error::{Error, Result};
+use crate::layout::view::View;
+use crate::layout::{Kind, PrimKind};
+use crate::memory::HostMemory;
+use parking_lot::RawRwLock;
+use parking_lot::lock_api::ArcRwLockReadGuard;
+use std::ops::Range;
+use std::sync::Arc;
+
+type Guard = ArcRwLockReadGuard<RawRwLock, HostMemory>;
+
+/// Where a structure's bytes are: which locked memory, which range.
+#[derive(Clone, Debug)]
+struct Region {
+    memory: usize,
+    range: Range<usize>,
+}
+
+/// A top-level structure ready for tracing. Holds read locks on the memory of every structure
+/// involved: builds into them fail with [`Error::InUse`] until the scene is dropped.
+pub struct Scene {
+    guards: Vec<Guard>,
+    tlas: Option<Region>,
+    blases: Vec<Region>,
+    /// Per stored instance of the TLAS: index into `blases`, or `u32::MAX` when the reference
+    /// does not name a valid, built bottom-level structure (such instances are skipped).
+    instance_blas: Vec<u32>,
+    /// Instances skipped because their reference was not usable.
+    pub unresolved_instances: usize,
+}
+
+/// What a batch trace reports for one ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    pub kind: HitKind,
+    pub t: f32,
+    pub instance_id: u32,
+    pub instance_custom_index: u32,
+    pub geometry_index: u32,
+    pub primitive_index: u32,
+    pub barycentrics: [f32; 2],
+    pub front_face: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum HitKind {
+    Miss = 0,
+    Triangle = 1,
+    Generated = 2,
+}
+
+impl Hit {
+    pub const MISS: Hit = Hit {
+        kind: HitKind::Miss,
+        t: 0.0,
+        instance_id: 0,
+        instance_custom_index: 0,
+        geometry_index: 0,
+        primitive_index: 0,
+        barycentrics: [0.0; 2],
+        front_face: false,
+    };
+    pub fn is_hit(&self) -> bool {
+        self.kind != HitKind::Miss
+    }
+}
+
+impl Scene {
+    fn lock(guards: &mut Vec<(Arc<parking_lot::RwLock<HostMemory>>, Guard)>, mem: &Arc<parking_lot::RwLock<HostMemory>>, handle: u64) -> Result<usize> {
+        if let Some(i) = guards.iter().position(|(m, _)| Arc::ptr_eq(m, mem)) {
+            return Ok(i);
+        }
+        let g = mem.try_read_arc().ok_or(Error::InUse { handle })?;
+        guards.push((mem.clone(), g));
+        Ok(guards.len() - 1)
+    }
+
+    /// Locks and validates `tlas` and every bottom-level structure its instances reference.
+    pub fn new(device: &Device, tlas: AccelerationStructure) -> Result<Scene> {
+        let mut guards = Vec::new();
+        let obj = device.object(tlas)?;
+        let mem = obj.buffer.memory().ok_or_else(|| Error::NotBuilt { handle: tlas.0, reason: "its buffer has no memory bound".into() })?;
+        let m = Scene::lock(&mut guards, &mem, tlas.0)?;
+        let region = Region { memory: m, range: obj.offset as usize..(obj.offset + obj.size) as usize };
+        let bytes = &guards[m].1.bytes()[region.range.clone()];
+        let view = View::parse(bytes).map_err(|reason| Error::NotBuilt { handle: tlas.0, reason })?;
+        if view.header.kind != Kind::TopLevel as u32 {
+            return Err(Error::NotBuilt { handle: tlas.0, reason: "ray queries need a top-level structure".into() });
+        }
+        let references: Vec<u64> = view.instances.iter().map(|i| i.acceleration_structure_reference).collect();
+        let mut blases: Vec<(u64, Region)> = Vec::new();
+        let mut instance_blas = Vec::with_capacity(references.len());
+        let mut unresolved = 0;
+        for r in references {
+            if let Some(i) = blases.iter().position(|(h, _)| *h == r) {
+                instance_blas.push(i as u32);
+                continue;
+            }
+            let resolved = (|| -> Option<Region> {
+                let o = device.object(AccelerationStructure(r)).ok()?;
+                let mem = o.buffer.memory()?;
+                let m = Scene::lock(&mut guards, &mem, r).ok()?;
+                let range = o.offset as usize..(o.offset + o.size) as usize;
+                let v = View::parse(&guards[m].1.bytes()[range.clone()]).ok()?;
+                (v.header.kind == Kind::BottomLevel as u32).then_some(Region { memory: m, range })
+            })();
+            match resolved {
+                Some(region) => {
+                    blases.push((r, region));
+                    instance_blas.push((blases.len() - 1) as u32);
+                }
+                None => {
+                    unresolved += 1;
+                    instance_blas.push(u32::MAX);
+                }
+            }
+        }
+        Ok(Scene {
+            guards: guards.into_iter().map(|(_, g)| g).collect(),
+            tlas: Some(region),
+            blases: blases.into_iter().map(|(_, r)| r).collect(),
+            instance_blas,
+            unresolved_instances: unresolved,
+        })
+    }
+
+    fn bytes(&self, r: &Region) -> &[u8] {
+        &self.guards[r.memory].bytes()[r.range.clone()]
+    }
+
+    pub(crate) fn tlas_view(&self) -> Option<View<'_>> {
+        View::reopen(self.bytes(self.tlas.as_ref()?)).ok()
+    }
+
+    pub(crate) fn blas_view_for(&self, instance_slot: u32) -> Option<View<'_>> {
+        let b = *self.instance_blas.get(instance_slot as usize)?;
+        View::reopen(self.bytes(self.blases.get(b as usize)?)).ok()
+    }
+
+    /// A ray query over this scene (`rayQueryInitializeEXT`).
+    pub fn ray_query(&self, ray: &Ray) -> Result<RayQuery<'_>> {
+        RayQuery::new(self, ray)
+    }
+
+    /// Closest hit with the semantics of `traceRayEXT` when no any-hit or intersection shader
+    /// is bound: non-opaque triangles are accepted, AABBs report a hit where the ray enters
+    /// the box.
+    pub fn trace_closest(&self, ray: &Ray) -> Result<Hit> {
+        self.trace_with(ray, |_| true, |c| Some(c.t))
+    }
+
+    /// Like [`Scene::trace_closest`] but stops at the first accepted hit
+    /// (`TerminateOnFirstHit`).
+    pub fn trace_any(&self, ray: &Ray) -> Result<Hit> {
+        let mut r = *ray;
+        r.flags = r.flags | RayFlags::TERMINATE_ON_FIRST_HIT;
+        self.trace_closest(&r)
+    }
+
+    /// Closest hit with callbacks: `any_hit` decides on non-opaque triangle candidates
+    /// (return `true` to accept), `intersect` on AABB candidates (return the hit distance, or
+    /// `None`; distances outside `[tMin, current closest]` are ignored).
+    pub fn trace_with(
+        &self,
+        ray: &Ray,
+        mut any_hit: impl FnMut(&super::Intersection) -> bool,
+        mut intersect: impl FnMut(&super::Intersection) -> Option<f32>,
+    ) -> Result<Hit> {
+        let mut q = RayQuery::new(self, ray)?;
+        while q.proceed() {
+            let c = *q.candidate();
+            match c.candidate_type() {
+                Some(super::CandidateType::Triangle) => {
+                    if any_hit(&c) {
+                        q.confirm_intersection()?;
+                    }
+                }
+                Some(super::CandidateType::Aabb) => {
+                    if let Some(t) = intersect(&c) {
+                        // Outside the allowed range the hit is dropped, as a shader's would be.
+                        let _ = q.generate_intersection(t);
+                    }
+                }
+                None => {}
+            }
+        }
+        let c = q.committed();
+        Ok(match c.committed_type() {
+            CommittedType::None => Hit::MISS,
+            k => Hit {
+                kind: if k == CommittedType::Triangle { HitKind::Triangle } else { HitKind::Generated },
+                t: c.t,
+                instance_id: c.instance_id,
+                instance_custom_index: c.instance_custom_index,
+                geometry_index: c.geometry_index,
+                primitive_index: c.primitive_index,
+                barycentrics: c.barycentrics,
+                front_face: c.front_face,
+            },
+        })
+    }
+
+    /// Primitive kind of the BLAS behind stored instance `slot`, for statistics and tools.
+    pub fn instance_prim_kind(&self, slot: u32) -> Option<PrimKind> {
+        self.blas_view_for(slot).map(|v| v.prim_kind)
+    }
+}
+
+impl Device {
+    /// Locks `tlas` and the structures it references for tracing.
+    pub fn scene(&self, tlas: AccelerationStructure) -> Result<Scene> {
+        Scene::new(self, tlas)
+    }
+}
