@@ -31,13 +31,12 @@ pub struct BuildSizes {
 /// Decoded primitive data as it sits in scratch, indexed by primitive sequence number.
 const TRI_BYTES: usize = 36;
 
-fn scratch_per_prim(k: PrimKind) -> u64 {
-    // PrimRef, two sort keys, and the decoded primitive.
-    32 + 16 + k.prim_size()
-}
-
+/// Build scratch: a `PrimRef` (32 bytes), two sort keys (8 bytes each) and the decoded
+/// primitive per primitive, each array 64-byte aligned, plus room to align the start of
+/// whatever address the application gives.
 fn build_scratch_size(k: PrimKind, n: u64) -> u64 {
-    plan::build_scratch_size(0) + crate::layout::align_up(scratch_per_prim(k) * n, 64)
+    use crate::layout::align_up;
+    64 + align_up(32 * n, 64) + 2 * align_up(8 * n, 64) + align_up(k.prim_size() * n, 64)
 }
 
 /// One geometry's reader.

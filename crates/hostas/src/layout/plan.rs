@@ -36,12 +36,6 @@ impl Plan {
     }
 }
 
-/// Build scratch: a 32-byte `PrimRef` and an 8-byte sort key per primitive, plus slack to align
-/// them in whatever address the application gives.
-pub fn build_scratch_size(max_prims: u64) -> u64 {
-    align_up(40 * max_prims + 2 * SECTION_ALIGN, SECTION_ALIGN)
-}
-
 /// Update scratch: update works in place and needs only a little (never zero: the CTS asserts
 /// non-zero scratch sizes).
 pub fn update_scratch_size(_max_prims: u64) -> u64 {
