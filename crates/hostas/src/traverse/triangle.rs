@@ -109,7 +109,7 @@ impl ShearedRay {
         let cz = self.sz * c[kz];
         let t_scaled = u * az + vv * bz + w * cz;
         let rcp = 1.0 / det;
-        let t = t_scaled * rcp;
+        let t = t_scaled / det; // one rounding, not two: the spec asks for as much precision as possible
         if t.is_nan() {
             return None;
         }
