@@ -3,8 +3,9 @@
 # this crate; C++: the tinybvh shim and tinybvh-rs, both -march=native; Embree is the system
 # library, which picks its ISA at run time) and runs it. Arguments go to the benchmark
 # (see `run.sh --help`). Environment:
-#   PEERS_FEATURES   cargo features (default: "hostas"; add "cli-mesh" to load meshes with
-#                    hostas_cli::mesh; set to "" to build without the hostas adapter)
+#   PEERS_FEATURES   cargo features (default: "hostas,cli-mesh": the hostas adapter, and meshes
+#                    loaded with hostas_cli::mesh; "" builds without either, using the
+#                    stand-in mesh loader, for when the core does not compile)
 #   PEERS_JOBS       cargo -j (default 2)
 set -euo pipefail
 cd "$(dirname "$0")"
@@ -13,7 +14,7 @@ if ! dpkg -s libembree-dev >/dev/null 2>&1; then
     exit 1
 fi
 export RUSTFLAGS="${RUSTFLAGS:-} -C target-cpu=native"
-features="${PEERS_FEATURES-hostas}"
+features="${PEERS_FEATURES-hostas,cli-mesh}"
 t0=$(date +%s)
 cargo build --release -j "${PEERS_JOBS:-2}" --no-default-features --features "$features" 1>&2
 echo "run.sh: build took $(( $(date +%s) - t0 )) s" >&2
