@@ -194,11 +194,18 @@ impl Device {
         if info.offset % 256 != 0 {
             return Err(Error::vuid("VUID-VkAccelerationStructureCreateInfoKHR-offset-03734", at, format!("offset {} is not a multiple of 256", info.offset)));
         }
-        if info.device_address != 0 || info.create_flags.contains(vk::AccelerationStructureCreateFlagsKHR::DEVICE_ADDRESS_CAPTURE_REPLAY) {
+        if info.device_address != 0 {
             return Err(Error::vuid(
-                "VUID-VkAccelerationStructureCreateInfoKHR-deviceAddress-03488",
+                "VUID-vkCreateAccelerationStructureKHR-deviceAddress-03488",
                 at,
                 "deviceAddress capture/replay needs accelerationStructureCaptureReplay, which hostas does not support",
+            ));
+        }
+        if info.create_flags.contains(vk::AccelerationStructureCreateFlagsKHR::DEVICE_ADDRESS_CAPTURE_REPLAY) {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureCreateInfoKHR-createFlags-03613",
+                at,
+                "DEVICE_ADDRESS_CAPTURE_REPLAY needs accelerationStructureCaptureReplay, which hostas does not support",
             ));
         }
         if info.create_flags.contains(vk::AccelerationStructureCreateFlagsKHR::from_raw(0x4)) {

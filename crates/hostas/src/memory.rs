@@ -21,6 +21,13 @@ pub struct HostMemory {
     len: usize,
 }
 
+/// A 64-byte aligned copy of `bytes` (for validating untrusted data as typed sections).
+pub(crate) fn aligned_copy(bytes: &[u8]) -> Vec<Block> {
+    let mut blocks = vec![Block([0; 64]); bytes.len().div_ceil(64)];
+    bytemuck::cast_slice_mut::<Block, u8>(&mut blocks)[..bytes.len()].copy_from_slice(bytes);
+    blocks
+}
+
 impl HostMemory {
     fn new(len: usize) -> Result<HostMemory> {
         let n = len.div_ceil(64);

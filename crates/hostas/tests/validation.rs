@@ -5,8 +5,8 @@
 //! indices are meaningful. Every case also runs under `catch_unwind` in
 //! `no_invalid_input_panics`.
 //!
-//! Tests named `unchecked_*` are rules the specification states that hostas does not check;
-//! they and the other `#[ignore = "BUG: ..."]` tests fail today.
+//! Tests named `unchecked_*` cover rules that an early version did not check (found by these
+//! tests, then implemented).
 
 use hostas::{
     AabbsData, AccelerationStructure, AccelerationStructureCreateInfo, Affine, BuildGeometryInfo, BuildRangeInfo, Buffer,
@@ -389,12 +389,10 @@ rules! {
             .collect())
     }
 
-    #[ignore = "BUG: commands/validate.rs reports a non-INSTANCES geometry in a top-level build as type-03790 and a geometryCount != 1 as type-03789; the spec has them the other way round (03789: geometryType must be INSTANCES, 03790: geometryCount must be 1). Swap the two VUID strings."]
     tlas_with_triangles: vuid("VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03789"), geom(1, 0) => {
         build_bad(TLAS, fast(), &[tri_geom()], &[r(2)])
     }
 
-    #[ignore = "BUG: commands/validate.rs uses type-03789 for 'top-level geometryCount must be 1'; the spec's VUID for that rule is type-03790 (see tlas_with_triangles)."]
     tlas_geometry_count_not_one: vuid("VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03790"), info(1) => {
         let device = Device::new();
         let blas = simple_blas(&device);
@@ -640,7 +638,6 @@ rules! {
         with_neighbours(&device, BuildGeometryInfo::build(BLAS, fast(), &g, dst, &mut s), &[r(2)])
     }
 
-    #[ignore = "BUG: commands/mod.rs with_dst_src reports VUID-03722 with Location::default() (no info index); it should carry the info index (Location::info(i)) like every other per-info rule. Pass `at` into with_dst_src."]
     dst_buffer_unbound_location: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03722"), info(1) => {
         dst_buffer_unbound::case()
     }
@@ -827,7 +824,6 @@ rules! {
         tlas_bad(&device, &instances(blas, |i| i.acceleration_structure_reference = unbuilt.0))
     }
 
-    #[ignore = "BUG: an instance referencing a structure whose buffer has no memory bound reports VUID-03779 (instance_bounds maps the failed header read to 03779); the specific rule is VUID-vkBuildAccelerationStructuresKHR-pInfos-03724. Check the referenced buffer's binding first."]
     instance_reference_buffer_unbound: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03724"), prim(1, 0, 2) => {
         let device = Device::new();
         let blas = simple_blas(&device);
@@ -1074,7 +1070,7 @@ rules! {
         update_two([tri_geom(), tri_geom()], [r(2), r(2)], [tri_geom(), g1], [r(2), r(2)])
     }
 
-    update_triangle_made_active: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663"), info(1) => {
+    update_triangle_made_active: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663"), prim(1, 1, 1) => {
         let g1 = tris(TrianglesData { vertex_data: bytes_of(&TRI_POS_INACTIVE_1), ..tri_data() });
         update_two([tri_geom(), g1], [r(2), r(2)], [tri_geom(), tri_geom()], [r(2), r(2)])
     }
@@ -1084,12 +1080,12 @@ rules! {
         update_two([aabb_geom(), aabb_geom()], [r(2), r(2)], [aabb_geom(), g1], [r(2), r(2)])
     }
 
-    update_aabb_made_active: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663"), info(1) => {
+    update_aabb_made_active: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663"), prim(1, 1, 1) => {
         let g1 = Geometry::aabbs(AabbsData { data: bytes_of(&BOXES_INACTIVE_1), stride: 24 }, vk::GeometryFlagsKHR::empty());
         update_two([aabb_geom(), g1], [r(2), r(2)], [aabb_geom(), aabb_geom()], [r(2), r(2)])
     }
 
-    update_instance_made_active: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663"), info(1) => {
+    update_instance_made_active: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663"), prim(1, 0, 1) => {
         // Instance 1 is inactive in the source; the update gives it a reference.
         let device = Device::new();
         let blas = simple_blas(&device);
@@ -1101,7 +1097,6 @@ rules! {
         update_bad(&device, Some(src), src, TLAS, updatable(), &[inst_geom(&after)], &[r(4)], Some(&mut s))
     }
 
-    #[ignore = "BUG: commands/build.rs refit (instances) checks `instances.len() != n` first and reports VUID-03663 (inactive made active) at info level when an active instance becomes inactive; that is VUID-03664, at the instance's index. Check for a missing active id (03664) before comparing counts, or compare the activity per instance index."]
     update_instance_made_inactive: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664"), prim(1, 0, 2) => {
         let device = Device::new();
         let blas = simple_blas(&device);
@@ -1128,12 +1123,10 @@ rules! {
         overlapping_update()
     }
 
-    #[ignore = "BUG: commands/mod.rs with_dst_src reports VUID-03668 with Location::default() (no info index); it should carry Location::info(i)."]
     update_src_dst_overlap_location: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03668"), info(1) => {
         overlapping_update()
     }
 
-    #[ignore = "BUG: an update whose source lives in a buffer with no memory bound reports VUID-03667 (update_one reads the source header first and maps every failure to 03667), so the 03723 branch in commands/mod.rs with_dst_src is unreachable. Check the source buffer's binding before reading its header, and report 03723 with the info index."]
     update_src_buffer_unbound: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03723"), info(1) => {
         let device = Device::new();
         let ci = AccelerationStructureCreateInfo { buffer: Some(Buffer::new_unbound(BIG)), ..AccelerationStructureCreateInfo::new(BLAS, BIG) };
@@ -1145,7 +1138,6 @@ rules! {
 
     // ---- Rules the specification states and hostas does not check ---------------------------
 
-    #[ignore = "BUG: not checked: VUID-vkBuildAccelerationStructuresKHR-firstVertex-03770 (an update of indexed triangles must keep firstVertex). GeometryRecord stores no firstVertex; store it and compare in check_update_geometries."]
     unchecked_update_first_vertex_changed: vuid("VUID-vkBuildAccelerationStructuresKHR-firstVertex-03770"), geom(1, 1) => {
         // Seven vertices, so that indices 0..5 fit with firstVertex 0 and with firstVertex 1.
         static POS7: [[f32; 3]; 7] = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0], [2.0, 1.0, 0.0]];
@@ -1153,7 +1145,6 @@ rules! {
         update_two([tri_geom(), g], [r(2), r(2)], [tri_geom(), g], [r(2), BuildRangeInfo { first_vertex: 1, ..r(2) }])
     }
 
-    #[ignore = "BUG: not checked: VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629 applies whatever the mode; a BUILD with an invalid non-NULL srcAccelerationStructure is accepted (build_acceleration_structures only validates src in update_one)."]
     unchecked_src_invalid_in_build_mode: vuid("VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629"), info(1) => {
         let device = Device::new();
         let g = [tri_geom()];
@@ -1163,7 +1154,6 @@ rules! {
         with_neighbours(&device, info, &[r(2)])
     }
 
-    #[ignore = "BUG: not checked: VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03701 (a destination's memory overlaps the source of another info's update); only handle equality (03403) is checked. Compare memory ranges of dsts against update srcs like the 03702 loop does."]
     unchecked_dst_overlaps_other_update_src: vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03701"), info(0) => {
         let device = Device::new();
         let buffer = Buffer::new(2 * BIG).expect("buffer");
@@ -1181,8 +1171,7 @@ rules! {
         device.build_acceleration_structures(&mut [BuildGeometryInfo::build(BLAS, fast(), &g, d, &mut s0), update], &[&ranges, &ranges])
     }
 
-    #[ignore = "BUG: not checked: VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706 (a destination's memory overlaps a BLAS referenced by another info's instances); 03407 compares handles only."]
-    unchecked_dst_overlaps_referenced_blas: vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706"), info(0) => {
+    unchecked_dst_overlaps_referenced_blas: vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706"), prim(1, 0, 0) => {
         let device = Device::new();
         let buffer = Buffer::new(2 * BIG).expect("buffer");
         let place = |offset: u64| {
@@ -1203,7 +1192,6 @@ rules! {
         )
     }
 
-    #[ignore = "BUG: not checked: VUID-vkBuildAccelerationStructuresKHR-None-03407 in UPDATE mode: update_one calls instance_bounds with an empty destination list, so an updated TLAS may reference a structure another info of the same call is building. Pass `dsts` to update_one."]
     unchecked_update_instance_references_dst_of_call: vuid("VUID-vkBuildAccelerationStructuresKHR-None-03407"), prim(1, 0, 2) => {
         let device = Device::new();
         let blas = simple_blas(&device);
@@ -1218,14 +1206,12 @@ rules! {
         device.build_acceleration_structures(&mut [BuildGeometryInfo::build(BLAS, fast(), &g, other, &mut s0), update], &[&[r(2)], &[r(4)]])
     }
 
-    #[ignore = "BUG: not checked: VUID-VkAccelerationStructureInstanceKHR-flags-parameter also forbids bits that are not VkGeometryInstanceFlagBitsKHR (0x40, 0x80; 0x10/0x20 belong to VK_EXT_opacity_micromap, which hostas does not expose); InstanceReader::instance only rejects FORCE_OPAQUE|FORCE_NO_OPAQUE."]
     unchecked_instance_flags_unknown_bits: vuid("VUID-VkAccelerationStructureInstanceKHR-flags-parameter"), prim(1, 0, 2) => {
         let device = Device::new();
         let blas = simple_blas(&device);
         tlas_bad(&device, &instances(blas, |i| i.flags = vk::GeometryInstanceFlagsKHR::from_raw(0x80)))
     }
 
-    #[ignore = "BUG: not checked: vkGetAccelerationStructureBuildSizesKHR applies no VkAccelerationStructureGeometryTrianglesDataKHR / AabbsDataKHR rule (vertexFormat-03797, indexType-03798, vertexStride-03735/03819, stride-03545/03820): an unsupported vertex format gets sizes. Run the geometry-data checks of TriangleReader::new / AabbReader::new (those that read no memory) in validate::info."]
     unchecked_sizes_vertex_format: vuid("VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexFormat-03797"), sizes_geom(1) => {
         sizes(BLAS, fast(), &[tri_geom(), tris(TrianglesData { vertex_format: vk::Format::R8_UNORM, ..tri_data() })], &[2, 2])
     }
@@ -1261,7 +1247,6 @@ rules! {
         ])
     }
 
-    #[ignore = "BUG: device.rs names the deviceAddress rule VUID-VkAccelerationStructureCreateInfoKHR-deviceAddress-03488; the spec's VUID is VUID-vkCreateAccelerationStructureKHR-deviceAddress-03488 (a vkCreateAccelerationStructureKHR rule)."]
     create_device_address_nonzero: vuid("VUID-vkCreateAccelerationStructureKHR-deviceAddress-03488"), NOWHERE => {
         let ci = AccelerationStructureCreateInfo {
             device_address: 0x10000,
@@ -1271,19 +1256,7 @@ rules! {
         Device::new().create_acceleration_structure(&ci).map(|_| ())
     }
 
-    create_device_address_rejected: vuid("VUID-VkAccelerationStructureCreateInfoKHR-deviceAddress-03488"), NOWHERE => {
-        // What hostas reports today for both capture/replay inputs (see the two ignored tests
-        // around this one for the spec's VUIDs).
-        let device = Device::new();
-        let address = AccelerationStructureCreateInfo { device_address: 0x10000, ..AccelerationStructureCreateInfo::new(BLAS, 1024) };
-        let flag = AccelerationStructureCreateInfo {
-            create_flags: vk::AccelerationStructureCreateFlagsKHR::DEVICE_ADDRESS_CAPTURE_REPLAY,
-            ..AccelerationStructureCreateInfo::new(BLAS, 1024)
-        };
-        same(vec![device.create_acceleration_structure(&address).map(|_| ()), device.create_acceleration_structure(&flag).map(|_| ())])
-    }
 
-    #[ignore = "BUG: device.rs reports createFlags DEVICE_ADDRESS_CAPTURE_REPLAY without the capture/replay feature as ...deviceAddress-03488; the spec's VUID for the flag is VUID-VkAccelerationStructureCreateInfoKHR-createFlags-03613."]
     create_capture_replay_flag: vuid("VUID-VkAccelerationStructureCreateInfoKHR-createFlags-03613"), NOWHERE => {
         let ci = AccelerationStructureCreateInfo {
             create_flags: vk::AccelerationStructureCreateFlagsKHR::DEVICE_ADDRESS_CAPTURE_REPLAY,
@@ -1599,7 +1572,6 @@ fn cross_info_failures_write_nothing() {
 }
 
 #[test]
-#[ignore = "BUG: VUID-03407 is a cross-info rule but commands/build.rs checks it in build_one (instance_bounds), after the earlier infos have been built: with the BLAS at info 0 and the TLAS referencing it at info 1, the BLAS is written before the error. Check instance references against all destinations in the cross-info pass (it needs to read the instances of every TLAS info first)."]
 fn cross_info_03407_writes_nothing() {
     let device = Device::new();
     let g = [tri_geom()];

@@ -119,8 +119,12 @@ impl Device {
             }
             dsts.push(obj);
         }
+        let overlaps = |a: &AsObject, b: &AsObject| a.buffer.id() == b.buffer.id() && a.offset < b.offset + b.size && b.offset < a.offset + a.size;
         for (i, info) in infos.iter().enumerate() {
             if let Some(src) = info.src {
+                let src_obj = self.object(src).map_err(|_| {
+                    Error::vuid("VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629", Location::info(i), format!("srcAccelerationStructure {:#x} is not a valid handle", src.0))
+                })?;
                 for (j, d) in dsts.iter().enumerate() {
                     if j != i && d.handle == src.0 {
                         return Err(Error::vuid(
@@ -129,6 +133,39 @@ impl Device {
                             format!("the source is the destination of info {j}"),
                         ));
                     }
+                    if j != i && info.mode == vk::BuildAccelerationStructureModeKHR::UPDATE && overlaps(d, &src_obj) {
+                        return Err(Error::vuid(
+                            "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03701",
+                            Location::info(j),
+                            format!("the destination's memory overlaps the update source of info {i}"),
+                        ));
+                    }
+                }
+            }
+            // Instances may not reference any destination of this call, nor overlap one.
+            for (g, geom) in info.geometries.iter().enumerate() {
+                let crate::input::GeometryData::Instances(data) = &geom.data else { continue };
+                let Some(range) = ranges[i].get(g) else { continue };
+                let Ok(reader) = InstanceReader::new(data, range, Location::info(i).geometry(g)) else { continue };
+                for p in 0..reader.primitive_count {
+                    let Ok(inst) = reader.instance(p) else { continue };
+                    let r = inst.acceleration_structure_reference;
+                    if r == 0 {
+                        continue;
+                    }
+                    let at = Location::info(i).geometry(g).primitive(p);
+                    if let Some(j) = dsts.iter().position(|d| d.handle == r) {
+                        return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-None-03407", at, format!("instance references {r:#x}, the destination of info {j}")));
+                    }
+                    if let Ok(obj) = self.object(AccelerationStructure(r)) {
+                        if let Some(j) = dsts.iter().position(|d| overlaps(d, &obj)) {
+                            return Err(Error::vuid(
+                                "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706",
+                                at,
+                                format!("the referenced structure {r:#x} overlaps the destination of info {j}"),
+                            ));
+                        }
+                    }
                 }
             }
         }
@@ -136,7 +173,7 @@ impl Device {
             let at = Location::info(i);
             match info.mode {
                 vk::BuildAccelerationStructureModeKHR::BUILD => self.build_one(info, ranges[i], dst, at, &dsts)?,
-                vk::BuildAccelerationStructureModeKHR::UPDATE => self.update_one(info, ranges[i], dst, at)?,
+                vk::BuildAccelerationStructureModeKHR::UPDATE => self.update_one(info, ranges[i], dst, at, &dsts)?,
                 other => {
                     return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-mode-04628", at, format!("unknown mode {other:?}")));
                 }
@@ -199,6 +236,8 @@ impl Device {
                     index_type,
                     max_vertex,
                     extra,
+                    first_vertex: if index_type == vk::IndexType::NONE_KHR.as_raw() as u32 { 0 } else { r.first_vertex },
+                    reserved: [0; 3],
                 };
                 first += r.primitive_count;
                 rec
@@ -222,6 +261,9 @@ impl Device {
         let r = inst.acceleration_structure_reference;
         let bad = |msg: String| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03779", at, msg);
         let obj = self.object(AccelerationStructure(r)).map_err(|_| bad(format!("accelerationStructureReference {r:#x} is not an acceleration structure of this device")))?;
+        if obj.buffer.memory().is_none() {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03724", at, format!("the buffer of referenced structure {r:#x} has no memory bound")));
+        }
         if dsts.iter().any(|d| d.handle == r) {
             return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-None-03407", at, format!("instance references {r:#x}, a destination of this call")));
         }
@@ -327,19 +369,22 @@ impl Device {
         };
         let data = &*data;
         let refs = &*refs;
-        self.with_dst_src(dst, None, |bytes, _| {
+        self.with_dst_src(dst, None, at, |bytes, _| {
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
             write_prims(bytes, &header, prim_kind, refs, data)
         })
     }
 
-    fn update_one(&self, info: &mut BuildGeometryInfo, ranges: &[BuildRangeInfo], dst: &AsObject, at: Location) -> Result<()> {
+    fn update_one(&self, info: &mut BuildGeometryInfo, ranges: &[BuildRangeInfo], dst: &AsObject, at: Location, dsts: &[AsObject]) -> Result<()> {
         let (kind, prim_kind) = validate::info(info, at)?;
         Self::check_dst_type(info, kind, dst, at)?;
         let src_handle = info.src.ok_or_else(|| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-04630", at, "mode is UPDATE but srcAccelerationStructure is NULL"))?;
         let src = self.object(src_handle).map_err(|_| {
             Error::vuid("VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629", at, format!("srcAccelerationStructure {:#x} is not a valid handle", src_handle.0))
         })?;
+        if src.buffer.memory().is_none() {
+            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03723", at, "the source's buffer has no memory bound"));
+        }
         let src_header = self.header(src_handle).map_err(|e| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03667", at, format!("source holds no built structure: {e}")))?;
         if src_header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw() == 0 {
             return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03667", at, "the source was not built with ALLOW_UPDATE"));
@@ -384,11 +429,11 @@ impl Device {
                 if inst.acceleration_structure_reference == 0 {
                     continue;
                 }
-                let bounds = self.instance_bounds(&inst, &[], at)?;
+                let bounds = self.instance_bounds(&inst, dsts, at)?;
                 instance_updates.push((Self::instance_record(&inst, i, at)?, bounds));
             }
         }
-        self.with_dst_src(dst, Some(&src), |bytes, src_bytes| {
+        self.with_dst_src(dst, Some(&src), at, |bytes, src_bytes| {
             if let Some(s) = src_bytes {
                 let used = src_header.used_size as usize;
                 bytes[..used].copy_from_slice(&s[..used]);
@@ -530,6 +575,7 @@ fn check_update_geometries(old: &[GeometryRecord], new: &[GeometryRecord], at: L
             return Err(Error::vuid(vuid, at, "transformData NULL-ness differs from the source's"));
         }
         rule(o.primitive_count == n.primitive_count, "VUID-vkBuildAccelerationStructuresKHR-primitiveCount-03769", "primitiveCount")?;
+        rule(o.first_vertex == n.first_vertex, "VUID-vkBuildAccelerationStructuresKHR-firstVertex-03770", "firstVertex (indexed triangles)")?;
     }
     Ok(())
 }
@@ -539,7 +585,7 @@ fn check_update_geometries(old: &[GeometryRecord], new: &[GeometryRecord], at: L
 /// depth-first order, so one reverse pass suffices).
 fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], instances: &[(InstanceRecord, Aabb)], at: Location) -> Result<()> {
     let n = h.stored_count as usize;
-    let geoms: Vec<GeometryRecord> = bytemuck::pod_collect_to_vec(&bytes[h.geometries_offset as usize..h.geometries_offset as usize + 32 * h.geometry_count as usize]);
+    let geoms: Vec<GeometryRecord> = bytemuck::pod_collect_to_vec(&bytes[h.geometries_offset as usize..h.geometries_offset as usize + crate::layout::GEOMETRY_RECORD_SIZE as usize * h.geometry_count as usize]);
     let ids: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[h.prim_ids_offset as usize..h.prim_ids_offset as usize + 4 * n]);
     let locate = |id: u32| {
         let g = geoms.partition_point(|r| r.first_primitive <= id).saturating_sub(1);
@@ -551,22 +597,29 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
     let prims = &mut bytes[h.prims_offset as usize..h.prims_offset as usize + size * n];
     match prim_kind {
         PrimKind::Triangles | PrimKind::Aabbs => {
-            // Every primitive: stored ones must still be active, the others still inactive.
-            let mut active_now = 0usize;
-            for (g, r) in readers.iter().enumerate() {
-                let count = match r {
-                    Reader::Triangles(t) => t.primitive_count,
-                    Reader::Aabbs(a) => a.primitive_count,
-                    Reader::Instances(_) => 0,
-                };
-                for i in 0..count {
-                    let active = match r {
-                        Reader::Triangles(t) => t.triangle(i)?.is_some(),
-                        Reader::Aabbs(a) => a.aabb(i)?.is_some(),
-                        Reader::Instances(_) => false,
+            // Primitives not stored were inactive and must still be (VUID-03663).
+            if n < h.primitive_count as usize {
+                let mut stored = vec![false; h.primitive_count as usize];
+                for &id in &ids {
+                    stored[id as usize] = true;
+                }
+                for (g, r) in readers.iter().enumerate() {
+                    let first = geoms[g].first_primitive;
+                    let count = match r {
+                        Reader::Triangles(t) => t.primitive_count,
+                        Reader::Aabbs(a) => a.primitive_count,
+                        Reader::Instances(_) => 0,
                     };
-                    let _ = g;
-                    active_now += active as usize;
+                    for i in (0..count).filter(|&i| !stored[(first + i) as usize]) {
+                        let active = match r {
+                            Reader::Triangles(t) => t.triangle(i)?.is_some(),
+                            Reader::Aabbs(a) => a.aabb(i)?.is_some(),
+                            Reader::Instances(_) => false,
+                        };
+                        if active {
+                            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663", at.geometry(g).primitive(i), "an inactive primitive became active in an update"));
+                        }
+                    }
                 }
             }
             let results: Vec<Result<()>> = prims
@@ -601,26 +654,29 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
             for r in results {
                 r?;
             }
-            if active_now != n {
-                return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663", at, "an inactive primitive became active in an update"));
-            }
         }
         PrimKind::Instances => {
-            if instances.len() != n {
-                return Err(Error::vuid(
-                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
-                    at,
-                    format!("{} active instances, the source has {n}: activity must not change in an update", instances.len()),
-                ));
+            // New instances by instance index; every stored one must still be active, and no
+            // other may have become active.
+            let mut by_id: Vec<Option<usize>> = vec![None; h.primitive_count as usize];
+            for (k, (r, _)) in instances.iter().enumerate() {
+                if let Some(s) = by_id.get_mut(r.instance_id as usize) {
+                    *s = Some(k);
+                }
             }
+            let mut used = vec![false; instances.len()];
             let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(prims).map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
             for (slot, rec) in recs.iter_mut().enumerate() {
                 let id = ids[slot];
-                let Some(pos) = instances.iter().position(|(r, _)| r.instance_id == id) else {
+                let Some(k) = by_id.get(id as usize).copied().flatten() else {
                     return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at.geometry(0).primitive(id), "an active instance became inactive in an update"));
                 };
-                *rec = instances[pos].0;
-                bounds[slot] = instances[pos].1;
+                used[k] = true;
+                *rec = instances[k].0;
+                bounds[slot] = instances[k].1;
+            }
+            if let Some(k) = used.iter().position(|u| !u) {
+                return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663", at.geometry(0).primitive(instances[k].0.instance_id), "an inactive instance became active in an update"));
             }
         }
         PrimKind::None => {}

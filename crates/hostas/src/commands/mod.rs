@@ -2,9 +2,11 @@
 //! the memory it touches, and calls the builders, encoder or traversal.
 
 pub mod build;
+pub mod copy;
 mod validate;
 
 pub use build::BuildSizes;
+pub use copy::SerializedHeader;
 
 use crate::device::{AsObject, Device};
 use crate::error::{Error, Result};
@@ -17,11 +19,12 @@ impl Device {
         &self,
         dst: &AsObject,
         src: Option<&AsObject>,
+        at: crate::error::Location,
         f: impl FnOnce(&mut [u8], Option<&[u8]>) -> Result<R>,
     ) -> Result<R> {
         let dmem = dst.buffer.memory().ok_or_else(|| Error::vuid(
             "VUID-vkBuildAccelerationStructuresKHR-pInfos-03722",
-            Default::default(),
+            at,
             format!("the buffer of acceleration structure {:#x} has no memory bound", dst.handle),
         ))?;
         let src = src.filter(|s| s.handle != dst.handle);
@@ -34,7 +37,7 @@ impl Device {
             Some(s) => {
                 let smem = s.buffer.memory().ok_or_else(|| Error::vuid(
                     "VUID-vkBuildAccelerationStructuresKHR-pInfos-03723",
-                    Default::default(),
+                    at,
                     format!("the buffer of acceleration structure {:#x} has no memory bound", s.handle),
                 ))?;
                 if std::sync::Arc::ptr_eq(&dmem, &smem) {
@@ -45,7 +48,7 @@ impl Device {
                     if d0 < s1 && s0 < d1 {
                         return Err(Error::vuid(
                             "VUID-vkBuildAccelerationStructuresKHR-pInfos-03668",
-                            Default::default(),
+                            at,
                             "source and destination memory overlap but are not the same structure",
                         ));
                     }

@@ -52,14 +52,27 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
             return Err(Error::vuid("VUID-VkAccelerationStructureGeometryKHR-flags-parameter", at, format!("unknown geometry flags {:#x}", geom.flags.as_raw())));
         }
         let k = match geom.data {
-            GeometryData::Triangles(_) => PrimKind::Triangles,
-            GeometryData::Aabbs(_) => PrimKind::Aabbs,
+            GeometryData::Triangles(t) => {
+                // The address-independent rules (build sizes ignore addresses); the readers
+                // check the rest against the data and the ranges.
+                let probe = crate::input::TrianglesData {
+                    transform_data: None,
+                    index_data: if t.index_type == vk::IndexType::NONE_KHR { None } else { Some(&[]) },
+                    ..t
+                };
+                crate::input::triangles::TriangleReader::new(&probe, &Default::default(), at)?;
+                PrimKind::Triangles
+            }
+            GeometryData::Aabbs(a) => {
+                crate::input::aabbs::AabbReader::new(&a, &Default::default(), at)?;
+                PrimKind::Aabbs
+            }
             GeometryData::Instances(_) => PrimKind::Instances,
         };
         match kind {
             Kind::TopLevel if k != PrimKind::Instances => {
                 return Err(Error::vuid(
-                    "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03790",
+                    "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03789",
                     at,
                     "a top-level build's geometry must be of type INSTANCES",
                 ));
@@ -84,7 +97,7 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
     }
     if kind == Kind::TopLevel && g.len() != 1 {
         return Err(Error::vuid(
-            "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03789",
+            "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03790",
             at,
             format!("a top-level build must have exactly one geometry, not {}", g.len()),
         ));

@@ -93,6 +93,17 @@ impl<'a> InstanceReader<'a> {
                 Instance::decode(bytes).ok_or_else(|| too_short("instance pointed to by instances.data", 64, bytes.len()))?
             }
         };
+        let known = vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE
+            | vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING
+            | vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+            | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
+        if !known.contains(inst.flags) {
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureInstanceKHR-flags-parameter",
+                location,
+                format!("instance flags {:#x} include bits of extensions hostas does not support (opacity micromaps)", inst.flags.as_raw()),
+            ));
+        }
         let forced = vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
         if inst.flags.contains(forced) {
             return Err(Error::vuid(

@@ -30,7 +30,7 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
         return Err(Error::RangeTooShort { what: "acceleration structure", needed: plan.total_size, available: dst.len() as u64, location: Default::default() });
     }
     let allocated_size = dst.len() as u64;
-    let g_bytes = &mut dst[plan.geometries_offset as usize..plan.geometries_offset as usize + 32 * geometries.len()];
+    let g_bytes = &mut dst[plan.geometries_offset as usize..plan.geometries_offset as usize + super::GEOMETRY_RECORD_SIZE as usize * geometries.len()];
     g_bytes.copy_from_slice(bytemuck::cast_slice(geometries));
 
     let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut dst[plan.nodes_offset as usize..(plan.nodes_offset + 128 * plan.node_capacity) as usize])
@@ -73,7 +73,7 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
         header_flags: fields.header_flags,
         preset: fields.preset,
         bounds,
-        used_size: plan.total_size,
+        used_size: plan.nodes_offset + 128 * w.count as u64,
         allocated_size,
         geometries_offset: plan.geometries_offset,
         nodes_offset: plan.nodes_offset,

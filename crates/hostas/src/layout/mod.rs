@@ -9,15 +9,16 @@
 //! ```text
 //! offset 0     Header (256 bytes): magic, LAYOUT_VERSION, type, flags, counts, bounds,
 //!              used size, section offsets
-//! geometries   GeometryRecord per geometry (32 bytes): first primitive, counts, formats, flags
+//! geometries   GeometryRecord per geometry (48 bytes): first primitive, counts, formats, flags
 //!              (what update and the ray query's geometry lookup need)
-//! nodes        Node per BVH4 node (128 bytes), depth-first order, root first
 //! prims        the stored (active) primitives in leaf order:
 //!              triangles: [f32; 9] vertices after the geometry transform, in index order
 //!              AABBs: [f32; 6]
 //!              instances: InstanceRecord (128 bytes)
 //! prim_ids     u32 per stored primitive: the primitive's sequence number across all geometries
 //!              (geometry's first primitive + primitive index), inactive primitives counted
+//! nodes        Node per BVH4 node (128 bytes), depth-first order, root first; last, so that
+//!              the used size ends at the last node
 //! ```
 //! Every section starts at a multiple of [`SECTION_ALIGN`]. All fields are little-endian.
 
@@ -31,7 +32,7 @@ use bytemuck::{Pod, Zeroable};
 /// `b"HOST"` read as a little-endian u32.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HOST");
 /// Bumped on any change of the byte layout; part of the compatibility UUID.
-pub const LAYOUT_VERSION: u32 = 1;
+pub const LAYOUT_VERSION: u32 = 2;
 pub const SECTION_ALIGN: u64 = 64;
 pub const HEADER_SIZE: u64 = 256;
 /// Branching factor of the stored tree.
@@ -148,7 +149,13 @@ pub struct GeometryRecord {
     /// 1 if a geometry transform was given (triangles), 2 if instances were an array of
     /// pointers.
     pub extra: u32,
+    /// `firstVertex` of the range (indexed triangles must keep it in an update).
+    pub first_vertex: u32,
+    pub reserved: [u32; 3],
 }
+
+pub const GEOMETRY_RECORD_SIZE: u64 = std::mem::size_of::<GeometryRecord>() as u64;
+const _: () = assert!(GEOMETRY_RECORD_SIZE == 48);
 
 /// A 4-wide node: child boxes in structure-of-arrays form, so one ray tests all four at once.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]

@@ -2,7 +2,7 @@
 //! `vkGetAccelerationStructureBuildSizesKHR` answers from it and the encoder writes by it, so the
 //! two cannot disagree.
 
-use super::{HEADER_SIZE, PrimKind, SECTION_ALIGN, align_up};
+use super::{GEOMETRY_RECORD_SIZE, HEADER_SIZE, PrimKind, SECTION_ALIGN, align_up};
 
 /// Section offsets and sizes for a structure with at most `max_prims` primitives.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -26,12 +26,14 @@ pub fn max_nodes(n: u64) -> u64 {
 
 impl Plan {
     pub fn new(kind: PrimKind, geometry_count: u64, max_prims: u64) -> Plan {
+        // Nodes go last: their count is the only one not known before the build, so the used
+        // size (what compaction keeps) ends right after the last node written.
         let geometries_offset = HEADER_SIZE;
-        let nodes_offset = align_up(geometries_offset + 32 * geometry_count, SECTION_ALIGN);
-        let node_capacity = max_nodes(max_prims);
-        let prims_offset = align_up(nodes_offset + 128 * node_capacity, SECTION_ALIGN);
+        let prims_offset = align_up(geometries_offset + GEOMETRY_RECORD_SIZE * geometry_count, SECTION_ALIGN);
         let prim_ids_offset = align_up(prims_offset + kind.prim_size() * max_prims, SECTION_ALIGN);
-        let total_size = align_up(prim_ids_offset + 4 * max_prims, SECTION_ALIGN);
+        let nodes_offset = align_up(prim_ids_offset + 4 * max_prims, SECTION_ALIGN);
+        let node_capacity = max_nodes(max_prims);
+        let total_size = nodes_offset + 128 * node_capacity;
         Plan { geometries_offset, nodes_offset, prims_offset, prim_ids_offset, node_capacity, prim_capacity: max_prims, total_size }
     }
 }

@@ -76,6 +76,17 @@ impl<'a> View<'a> {
             }
         }
         let prim_ids: &[u32] = section(bytes, h.prim_ids_offset, stored, "primitive id")?;
+        // Everything a reader touches lies inside the used size, which is all a compacted
+        // copy keeps.
+        let ends = [
+            h.geometries_offset + super::GEOMETRY_RECORD_SIZE * h.geometry_count as u64,
+            h.prims_offset + prim_kind.prim_size() * stored,
+            h.prim_ids_offset + 4 * stored,
+            h.nodes_offset + 128 * h.node_count as u64,
+        ];
+        if ends.iter().any(|&e| e > h.used_size) {
+            return Err("a section ends past the used size".into());
+        }
 
         // Geometries: consecutive primitive ranges covering primitive_count.
         let mut next = 0u64;

@@ -108,9 +108,24 @@ struct Stack {
     len: usize,
 }
 
+thread_local! {
+    /// Stacks of finished queries, reused so that a query allocates nothing.
+    static STACK_POOL: std::cell::RefCell<Vec<Box<Stack>>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
 impl Stack {
     fn new() -> Box<Stack> {
-        Box::new(Stack { items: [Entry::default(); STACK_CAPACITY], len: 0 })
+        STACK_POOL
+            .with(|p| p.borrow_mut().pop())
+            .unwrap_or_else(|| Box::new(Stack { items: [Entry::default(); STACK_CAPACITY], len: 0 }))
+    }
+    fn recycle(self: Box<Stack>) {
+        STACK_POOL.with(|p| {
+            let mut p = p.borrow_mut();
+            if p.len() < 8 {
+                p.push(self);
+            }
+        });
     }
     #[inline(always)]
     fn push(&mut self, e: Entry) {
@@ -215,12 +230,23 @@ impl<'s> Level<'s> {
             let Some(node) = self.view.nodes.get(e.child as usize) else { continue };
             let t = self.ray.node(node, t_min, t_max);
             // Push hit children farthest first, so the nearest is popped next.
-            let mut order = [0usize, 1, 2, 3];
-            order.sort_unstable_by(|&a, &b| t[b].total_cmp(&t[a]));
-            for k in order {
+            let mut hits = [Entry::default(); 4];
+            let mut n = 0;
+            for k in 0..4 {
                 if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
-                    self.stack.push(Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] });
+                    // Insertion into `hits`, kept in decreasing distance.
+                    let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };
+                    let mut j = n;
+                    while j > 0 && hits[j - 1].t < e.t {
+                        hits[j] = hits[j - 1];
+                        j -= 1;
+                    }
+                    hits[j] = e;
+                    n += 1;
                 }
+            }
+            for e in &hits[..n] {
+                self.stack.push(*e);
             }
         }
         false
@@ -232,6 +258,14 @@ struct Bottom<'s> {
     sheared: ShearedRay,
     instance: &'s InstanceRecord,
     instance_slot: u32,
+}
+
+impl Drop for RayQuery<'_> {
+    fn drop(&mut self) {
+        for s in [self.top.take().map(|l| l.stack), self.bottom.take().map(|b| b.level.stack), self.spare_stack.take()].into_iter().flatten() {
+            s.recycle();
+        }
+    }
 }
 
 /// A ray query (`rayQueryEXT`) over a [`Scene`].

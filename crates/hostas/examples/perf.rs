@@ -1,0 +1,81 @@
+//! A quick look at build, trace and refit speed on a generated sphere. The full benchmark is
+//! `hostas bench` (and `bench/peers` for the side-by-side comparison).
+
+use hostas::{vk, Device, Ray};
+use std::time::Instant;
+
+fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut p = Vec::new();
+    let mut idx = Vec::new();
+    for i in 0..=n {
+        let th = std::f32::consts::PI * i as f32 / n as f32;
+        for j in 0..=2 * n {
+            let ph = std::f32::consts::PI * j as f32 / n as f32;
+            p.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
+        }
+    }
+    let w = 2 * n + 1;
+    for i in 0..n {
+        for j in 0..2 * n {
+            let a = i * w + j;
+            idx.push([a, a + w, a + 1]);
+            idx.push([a + 1, a + w, a + w + 1]);
+        }
+    }
+    (p, idx)
+}
+
+fn main() {
+    let n: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500);
+    let (p, idx) = sphere(n);
+    let tris = idx.len() as f64;
+    println!("sphere: {} triangles, {} threads", idx.len(), rayon::current_num_threads());
+    let device = Device::new();
+    for (name, flags) in [
+        ("fast-trace", vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE),
+        ("fast-build", vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD),
+        ("default", vk::BuildAccelerationStructureFlagsKHR::empty()),
+        ("low-memory", vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY),
+    ] {
+        let t = Instant::now();
+        let blas = hostas::quick::build_triangle_blas(&device, &p, &idx, flags).unwrap();
+        let build = t.elapsed().as_secs_f64();
+        let s = device.statistics(blas).unwrap();
+        let tlas = hostas::quick::build_single_instance_tlas(&device, blas).unwrap();
+        let scene = device.scene(tlas).unwrap();
+        let res = 512;
+        let t = Instant::now();
+        let mut hits = 0;
+        for y in 0..res {
+            for x in 0..res {
+                let d = [(x as f32 / res as f32 - 0.5) * 1.2, (y as f32 / res as f32 - 0.5) * 1.2, -1.0];
+                hits += scene.trace_closest(&Ray::new([0.0, 0.0, 3.0], d)).unwrap().is_hit() as u32;
+            }
+        }
+        let primary = (res * res) as f64 / t.elapsed().as_secs_f64() / 1e6;
+        let mut seed = 12345u32;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32 * 2.0 - 1.0
+        };
+        let t = Instant::now();
+        for _ in 0..res * res {
+            let o = [rnd() * 0.9, rnd() * 0.9, rnd() * 0.9];
+            let d = [rnd(), rnd(), rnd()];
+            scene.trace_closest(&Ray::new(o, d)).unwrap();
+        }
+        let incoherent = (res * res) as f64 / t.elapsed().as_secs_f64() / 1e6;
+        println!(
+            "{name:>11}: build {:7.1} ms ({:5.2} Mtris/s)  SAH {:6.2}  {:5.1} B/tri  depth {}  primary {:5.2} Mrays/s ({hits} hits)  incoherent {:5.2} Mrays/s",
+            build * 1e3,
+            tris / build / 1e6,
+            s.sah_cost,
+            s.used_bytes as f64 / tris,
+            s.depth,
+            primary,
+            incoherent
+        );
+    }
+}
