@@ -4,6 +4,18 @@ use bytemuck::{Pod, Zeroable};
 
 pub type Vec3 = [f32; 3];
 
+/// `min` as one instruction (`minss`): unlike `f32::min` it does not special-case NaN, which
+/// never reaches the hot paths that use it (inactive primitives are removed before).
+#[inline(always)]
+pub fn fmin(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+/// `max` as one instruction (`maxss`); see [`fmin`].
+#[inline(always)]
+pub fn fmax(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
 #[inline(always)]
 pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -35,15 +47,15 @@ impl Aabb {
     #[inline(always)]
     pub fn grow(&mut self, p: Vec3) {
         for k in 0..3 {
-            self.lo[k] = self.lo[k].min(p[k]);
-            self.hi[k] = self.hi[k].max(p[k]);
+            self.lo[k] = fmin(self.lo[k], p[k]);
+            self.hi[k] = fmax(self.hi[k], p[k]);
         }
     }
     #[inline(always)]
     pub fn union(&self, o: &Aabb) -> Aabb {
         Aabb {
-            lo: [self.lo[0].min(o.lo[0]), self.lo[1].min(o.lo[1]), self.lo[2].min(o.lo[2])],
-            hi: [self.hi[0].max(o.hi[0]), self.hi[1].max(o.hi[1]), self.hi[2].max(o.hi[2])],
+            lo: [fmin(self.lo[0], o.lo[0]), fmin(self.lo[1], o.lo[1]), fmin(self.lo[2], o.lo[2])],
+            hi: [fmax(self.hi[0], o.hi[0]), fmax(self.hi[1], o.hi[1]), fmax(self.hi[2], o.hi[2])],
         }
     }
     pub fn is_empty(&self) -> bool {

@@ -443,7 +443,7 @@ impl Device {
             }
             let view = View::parse(bytes).map_err(|reason| Error::NotBuilt { handle: src.handle, reason })?;
             check_update_geometries(view.geometries, &records, at)?;
-            let header = view.header;
+            let header = *view.header;
             refit(bytes, &header, prim_kind, &readers, &instance_updates, at)
         })
     }

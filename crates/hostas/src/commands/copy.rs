@@ -83,7 +83,7 @@ fn patch_allocated(bytes: &mut [u8], allocated: u64) {
 impl Device {
     fn constructed(&self, a: AccelerationStructure, vuid: &'static str) -> Result<(AsObject, Header)> {
         let obj = self.object(a)?;
-        let header = self.with_bytes(a, |b| View::parse(b).map(|v| v.header).map_err(|reason| Error::vuid(vuid, Location::NONE, format!("{:#x} holds no built structure: {reason}", a.0))))?;
+        let header = self.with_bytes(a, |b| View::parse(b).map(|v| *v.header).map_err(|reason| Error::vuid(vuid, Location::NONE, format!("{:#x} holds no built structure: {reason}", a.0))))?;
         Ok((obj, header))
     }
 
@@ -199,7 +199,7 @@ impl Device {
             if v.header.kind == Kind::BottomLevel as u32 && header.handle_count != 0 {
                 return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414", at, "a bottom-level structure carries no handles"));
             }
-            Ok((v.header, v.prim_kind))
+            Ok((*v.header, v.prim_kind))
         };
         let (h, prim_kind) = check(&bytemuck::cast_slice::<_, u8>(&staged)[..payload.len()])?;
         let dst_obj = self.object(dst)?;
@@ -253,7 +253,7 @@ impl Device {
             let at = Location::info(i);
             let v = self.with_bytes(*s, |b| {
                 let v = View::parse(b).map_err(|reason| Error::vuid("VUID-vkWriteAccelerationStructuresPropertiesKHR-pAccelerationStructures-11591", at, format!("structure {:#x} is not built: {reason}", s.0)))?;
-                let h = v.header;
+                let h = *v.header;
                 Ok(match query_type {
                     vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR => {
                         if h.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw() == 0 {

@@ -12,7 +12,7 @@ use super::{
 
 #[derive(Clone, Copy, Debug)]
 pub struct View<'a> {
-    pub header: Header,
+    pub header: &'a Header,
     pub prim_kind: PrimKind,
     pub geometries: &'a [GeometryRecord],
     pub nodes: &'a [Node],
@@ -24,7 +24,7 @@ pub struct View<'a> {
 
 fn section<'a, T: bytemuck::Pod>(bytes: &'a [u8], offset: u64, count: u64, what: &str) -> Result<&'a [T], String> {
     let size = std::mem::size_of::<T>() as u64;
-    let end = count.checked_mul(size).and_then(|s| s.checked_add(offset)).ok_or(format!("{what} section overflows"))?;
+    let end = count.checked_mul(size).and_then(|s| s.checked_add(offset)).ok_or_else(|| format!("{what} section overflows"))?;
     if end > bytes.len() as u64 {
         return Err(format!("{what} section ends at {end}, past the structure's {} bytes", bytes.len()));
     }
@@ -44,11 +44,17 @@ pub fn read_header(bytes: &[u8]) -> Result<Header, String> {
     Ok(header)
 }
 
+/// The header in place (the bytes must be 8-byte aligned, as structure memory is).
+fn header_ref(bytes: &[u8]) -> Result<&Header, String> {
+    read_header(bytes)?;
+    bytemuck::try_from_bytes(&bytes[..HEADER_SIZE as usize]).map_err(|e| format!("header is misaligned: {e}"))
+}
+
 impl<'a> View<'a> {
     pub fn parse(bytes: &'a [u8]) -> Result<View<'a>, String> {
-        let header = read_header(bytes)?;
-        let h = &header;
-        let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or(format!("unknown primitive kind {}", h.prim_kind))?;
+        let header = header_ref(bytes)?;
+        let h = header;
+        let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or_else(|| format!("unknown primitive kind {}", h.prim_kind))?;
         if h.kind > 1 {
             return Err(format!("unknown structure type {}", h.kind));
         }
@@ -153,8 +159,8 @@ impl<'a> View<'a> {
     /// Re-creates a view over bytes that [`View::parse`] accepted and that have not changed
     /// since (the caller holds the memory's read lock): the section slices only, no walk.
     pub fn reopen(bytes: &'a [u8]) -> Result<View<'a>, String> {
-        let header = read_header(bytes)?;
-        let h = &header;
+        let header: &Header = bytemuck::try_from_bytes(bytes.get(..HEADER_SIZE as usize).ok_or("too short")?).map_err(|_| "misaligned")?;
+        let h = header;
         let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or("unknown primitive kind")?;
         let stored = h.stored_count as u64;
         let geometries = section(bytes, h.geometries_offset, h.geometry_count as u64, "geometry")?;

@@ -12,7 +12,7 @@ use super::{Ray, RayFlags};
 use crate::error::{Error, Location, Result};
 use crate::layout::view::View;
 use crate::layout::{EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind};
-use crate::math::{Affine, Vec3};
+use crate::math::{Affine, Vec3, fmax, fmin};
 use ash::vk;
 
 /// `RayQueryCommittedIntersectionTypeKHR`.
@@ -153,6 +153,8 @@ const ROBUST_FAR: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f3
 struct BoxRay {
     origin: Vec3,
     inv: Vec3,
+    /// Per axis: the ray goes towards smaller values, so a box's near plane is its max.
+    neg: [bool; 3],
 }
 
 impl BoxRay {
@@ -160,24 +162,23 @@ impl BoxRay {
         // A zero component gives a huge finite inverse, not infinity, so that a ray lying in a
         // slab's plane computes 0 * x = 0 instead of 0 * inf = NaN.
         let inv = dir.map(|d| if d == 0.0 { f32::MAX.copysign(d) } else { 1.0 / d });
-        BoxRay { origin, inv }
+        BoxRay { origin, inv, neg: inv.map(|i| i < 0.0) }
     }
 
     /// Entry distances of the four children of `node`; `f32::INFINITY` where the segment
     /// `[t_min, t_max]` misses (inclusive at both ends).
     #[inline(always)]
     fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; 4] {
+        let (nx, fx) = if self.neg[0] { (&n.hi_x, &n.lo_x) } else { (&n.lo_x, &n.hi_x) };
+        let (ny, fy) = if self.neg[1] { (&n.hi_y, &n.lo_y) } else { (&n.lo_y, &n.hi_y) };
+        let (nz, fz) = if self.neg[2] { (&n.hi_z, &n.lo_z) } else { (&n.lo_z, &n.hi_z) };
+        let [ox, oy, oz] = self.origin;
+        let [ix, iy, iz] = self.inv;
         let mut out = [f32::INFINITY; 4];
         for k in 0..4 {
-            let x0 = (n.lo_x[k] - self.origin[0]) * self.inv[0];
-            let x1 = (n.hi_x[k] - self.origin[0]) * self.inv[0];
-            let y0 = (n.lo_y[k] - self.origin[1]) * self.inv[1];
-            let y1 = (n.hi_y[k] - self.origin[1]) * self.inv[1];
-            let z0 = (n.lo_z[k] - self.origin[2]) * self.inv[2];
-            let z1 = (n.hi_z[k] - self.origin[2]) * self.inv[2];
-            let near = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(t_min);
-            let far = (x0.max(x1).min(y0.max(y1)).min(z0.max(z1)) * ROBUST_FAR).min(t_max);
-            out[k] = if near <= far { near } else { f32::INFINITY };
+            let near = fmax(fmax((nx[k] - ox) * ix, (ny[k] - oy) * iy), fmax((nz[k] - oz) * iz, t_min));
+            let far = fmin(fmin((fx[k] - ox) * ix, (fy[k] - oy) * iy), (fz[k] - oz) * iz) * ROBUST_FAR;
+            out[k] = if near <= fmin(far, t_max) { near } else { f32::INFINITY };
         }
         out
     }
