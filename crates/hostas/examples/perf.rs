@@ -27,6 +27,8 @@ fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 
 fn main() {
     let n: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500);
+    // `perf N PRESET`: build that preset only (for instruction counts with `perf stat`).
+    let only: Option<String> = std::env::args().nth(2);
     let (p, idx) = sphere(n);
     let tris = idx.len() as f64;
     println!("sphere: {} triangles, {} threads", idx.len(), rayon::current_num_threads());
@@ -37,10 +39,17 @@ fn main() {
         ("default", vk::BuildAccelerationStructureFlagsKHR::empty()),
         ("low-memory", vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY),
     ] {
+        if only.as_deref().is_some_and(|o| o != name) {
+            continue;
+        }
         let t = Instant::now();
         let blas = hostas::quick::build_triangle_blas(&device, &p, &idx, flags).unwrap();
         let build = t.elapsed().as_secs_f64();
         let s = device.statistics(blas).unwrap();
+        if only.is_some() {
+            println!("{name}: {:.1} ms, SAH {:.2}, {} nodes", build * 1e3, s.sah_cost, s.node_count);
+            continue;
+        }
         let tlas = hostas::quick::build_single_instance_tlas(&device, blas).unwrap();
         let scene = device.scene(tlas).unwrap();
         let res = 512;

@@ -1,15 +1,61 @@
 //! Top-down binned SAH builder (Wald 2007), filling 4-wide nodes by repeatedly splitting the
 //! child with the largest surface area. Primitive references are partitioned in place, so the
-//! final order is the order of `refs` on return.
+//! final order is the order of `refs` on return. Small ranges are split with an exact SAH
+//! sweep over sorted centroids instead of bins.
 
 use super::tree::{Child, InnerNode, Tree};
-use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef, pick_child_to_split};
-use crate::math::Aabb;
+use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
+use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
-pub const MAX_BINS: usize = 64;
+pub const MAX_BINS: usize = 32;
 /// SAH cost of traversing a node, relative to intersecting one primitive.
 pub const TRAVERSAL_COST: f32 = 1.0;
+/// Ranges up to this size are split by an exact sweep instead of binning.
+const SMALL: usize = 16;
+
+/// A box as two 4-lane arrays, so that growing it compiles to one `minps` and one `maxps`.
+/// Lane 3 carries whatever the source had there (a primitive id) and is ignored.
+#[derive(Clone, Copy, Debug)]
+struct B4 {
+    lo: [f32; 4],
+    hi: [f32; 4],
+}
+
+impl B4 {
+    const EMPTY: B4 = B4 { lo: [f32::INFINITY; 4], hi: [f32::NEG_INFINITY; 4] };
+
+    #[inline(always)]
+    fn of(r: &PrimRef) -> B4 {
+        let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
+        B4 { lo, hi }
+    }
+    #[inline(always)]
+    fn grow(&mut self, o: &B4) {
+        for i in 0..4 {
+            self.lo[i] = fmin(self.lo[i], o.lo[i]);
+            self.hi[i] = fmax(self.hi[i], o.hi[i]);
+        }
+    }
+    #[inline(always)]
+    fn grow_point(&mut self, p: &[f32; 4]) {
+        for i in 0..4 {
+            self.lo[i] = fmin(self.lo[i], p[i]);
+            self.hi[i] = fmax(self.hi[i], p[i]);
+        }
+    }
+    #[inline(always)]
+    fn half_area(&self) -> f32 {
+        let d = [self.hi[0] - self.lo[0], self.hi[1] - self.lo[1], self.hi[2] - self.lo[2]];
+        if d[0] < 0.0 || d[1] < 0.0 || d[2] < 0.0 {
+            return 0.0;
+        }
+        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+    fn aabb(&self) -> Aabb {
+        Aabb { lo: [self.lo[0], self.lo[1], self.lo[2]], hi: [self.hi[0], self.hi[1], self.hi[2]] }
+    }
+}
 
 /// Bounds of a range and of its primitives' (doubled) centroids.
 #[derive(Clone, Copy, Debug)]
@@ -18,29 +64,42 @@ pub(crate) struct RangeInfo {
     pub centroids: Aabb,
 }
 
+/// [`RangeInfo`] while it is being accumulated.
+#[derive(Clone, Copy)]
+struct Acc {
+    bounds: B4,
+    centroids: B4,
+}
+
+impl Acc {
+    const EMPTY: Acc = Acc { bounds: B4::EMPTY, centroids: B4::EMPTY };
+    #[inline(always)]
+    fn add(&mut self, r: &PrimRef) {
+        let b = B4::of(r);
+        self.bounds.grow(&b);
+        let c = [b.lo[0] + b.hi[0], b.lo[1] + b.hi[1], b.lo[2] + b.hi[2], 0.0];
+        self.centroids.grow_point(&c);
+    }
+    fn info(&self) -> RangeInfo {
+        RangeInfo { bounds: self.bounds.aabb(), centroids: self.centroids.aabb() }
+    }
+}
+
 impl RangeInfo {
     pub const EMPTY: RangeInfo = RangeInfo { bounds: Aabb::EMPTY, centroids: Aabb::EMPTY };
 
-    #[inline(always)]
-    fn add(&mut self, r: &PrimRef) {
-        self.bounds = self.bounds.union(&r.bounds());
-        self.centroids.grow(r.center2());
-    }
     fn merge(a: RangeInfo, b: RangeInfo) -> RangeInfo {
         RangeInfo { bounds: a.bounds.union(&b.bounds), centroids: a.centroids.union(&b.centroids) }
     }
     pub fn of(refs: &[PrimRef]) -> RangeInfo {
         if refs.len() > PARALLEL_THRESHOLD * 4 {
-            return refs
-                .par_chunks(PARALLEL_THRESHOLD)
-                .map(RangeInfo::of)
-                .reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
+            return refs.par_chunks(PARALLEL_THRESHOLD).map(RangeInfo::of).reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
         }
-        let mut info = RangeInfo::EMPTY;
+        let mut acc = Acc::EMPTY;
         for r in refs {
-            info.add(r);
+            acc.add(r);
         }
-        info
+        acc.info()
     }
 }
 
@@ -49,12 +108,13 @@ struct Ctx {
     max_leaf: usize,
 }
 
-/// A chosen split: primitives whose bin on `axis` is below `bin` go left.
+/// A two-way split of a range: `mid` primitives go left, with the infos of both sides and the
+/// SAH numerator `area(left) * n(left) + area(right) * n(right)`.
 #[derive(Clone, Copy, Debug)]
 struct Split {
-    axis: usize,
-    bin: usize,
-    /// `area(left) * n(left) + area(right) * n(right)`.
+    mid: usize,
+    left: RangeInfo,
+    right: RangeInfo,
     cost: f32,
 }
 
@@ -75,116 +135,175 @@ impl Binner {
         Binner { lo: centroids.lo, scale, bins }
     }
     #[inline(always)]
-    fn bin(&self, c: [f32; 3], k: usize) -> usize {
-        let b = ((c[k] - self.lo[k]) * self.scale[k]) as usize; // NaN and negatives give 0
-        b.min(self.bins - 1)
+    fn bin(&self, c: f32, k: usize) -> usize {
+        // Clamped in float first, so the conversion is a plain truncation (NaN gives 0).
+        let f = fmin(fmax((c - self.lo[k]) * self.scale[k], 0.0), (self.bins - 1) as f32);
+        f as i32 as usize
     }
 }
 
-#[derive(Clone)]
-struct Bins {
-    bounds: [[Aabb; MAX_BINS]; 3],
-    counts: [[u32; MAX_BINS]; 3],
+struct Bins<const N: usize> {
+    bounds: [[B4; N]; 3],
+    counts: [[u32; N]; 3],
 }
 
-impl Bins {
-    fn new() -> Bins {
-        Bins { bounds: [[Aabb::EMPTY; MAX_BINS]; 3], counts: [[0; MAX_BINS]; 3] }
+impl<const N: usize> Bins<N> {
+    fn new() -> Bins<N> {
+        Bins { bounds: [[B4::EMPTY; N]; 3], counts: [[0; N]; 3] }
     }
-    fn fill(binner: &Binner, refs: &[PrimRef]) -> Bins {
-        let mut b = Bins::new();
+    fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
         for r in refs {
-            let c = r.center2();
-            let rb = r.bounds();
+            let rb = B4::of(r);
             for k in 0..3 {
-                let i = binner.bin(c, k);
-                b.counts[k][i] += 1;
-                b.bounds[k][i] = b.bounds[k][i].union(&rb);
+                let i = binner.bin(rb.lo[k] + rb.hi[k], k).min(N - 1);
+                self.counts[k][i] += 1;
+                self.bounds[k][i].grow(&rb);
             }
         }
-        b
     }
-    fn merge(mut a: Bins, b: Bins) -> Bins {
+    fn merge(mut self, b: Bins<N>) -> Bins<N> {
         for k in 0..3 {
-            for i in 0..MAX_BINS {
-                a.counts[k][i] += b.counts[k][i];
-                a.bounds[k][i] = a.bounds[k][i].union(&b.bounds[k][i]);
+            for i in 0..N {
+                self.counts[k][i] += b.counts[k][i];
+                self.bounds[k][i].grow(&b.bounds[k][i]);
             }
         }
-        a
+        self
+    }
+
+    /// The best split plane: (axis, first bin of the right side, cost).
+    fn best(&self, binner: &Binner, n_total: usize) -> Option<(usize, usize, f32)> {
+        let mut best: Option<(usize, usize, f32)> = None;
+        for k in 0..3 {
+            if binner.scale[k] == 0.0 {
+                continue;
+            }
+            let mut right_cost = [0f32; N];
+            let mut acc = B4::EMPTY;
+            let mut n = 0u32;
+            for i in (1..N).rev() {
+                acc.grow(&self.bounds[k][i]);
+                n += self.counts[k][i];
+                right_cost[i] = acc.half_area() * n as f32;
+            }
+            let mut acc = B4::EMPTY;
+            let mut n = 0u32;
+            for i in 1..N {
+                acc.grow(&self.bounds[k][i - 1]);
+                n += self.counts[k][i - 1];
+                if n == 0 || n as usize == n_total {
+                    continue;
+                }
+                let cost = acc.half_area() * n as f32 + right_cost[i];
+                if best.is_none_or(|b| cost < b.2) {
+                    best = Some((k, i, cost));
+                }
+            }
+        }
+        best
     }
 }
 
-fn find_split(refs: &[PrimRef], info: &RangeInfo, ctx: &Ctx) -> Option<(Split, Binner)> {
-    let binner = Binner::new(&info.centroids, ctx.bins);
+fn best_bin_split_n<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f32)> {
+    let bins = if refs.len() > PARALLEL_THRESHOLD * 4 {
+        refs.par_chunks(PARALLEL_THRESHOLD)
+            .map(|c| {
+                let mut b = Bins::<N>::new();
+                b.fill(binner, c);
+                b
+            })
+            .reduce(Bins::new, Bins::merge)
+    } else {
+        let mut b = Bins::<N>::new();
+        b.fill(binner, refs);
+        b
+    };
+    bins.best(binner, refs.len())
+}
+
+/// The best binned split plane, with as many bins as `binner` says (8, 16 or 32).
+fn best_bin_split(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f32)> {
+    match binner.bins {
+        0..=8 => best_bin_split_n::<8>(refs, binner),
+        9..=16 => best_bin_split_n::<16>(refs, binner),
+        _ => best_bin_split_n::<32>(refs, binner),
+    }
+}
+
+/// Binned split, partitioning `refs` in place.
+fn binned_split(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx) -> Option<Split> {
+    // Small ranges gain nothing from many bins; they only pay for sweeping them.
+    let bins = if refs.len() < 256 { ctx.bins.min(8) } else { ctx.bins };
+    let binner = Binner::new(&info.centroids, bins);
     if binner.scale == [0.0; 3] {
         return None;
     }
-    let bins = if refs.len() > PARALLEL_THRESHOLD * 4 {
-        refs.par_chunks(PARALLEL_THRESHOLD).map(|c| Bins::fill(&binner, c)).reduce(Bins::new, Bins::merge)
-    } else {
-        Bins::fill(&binner, refs)
-    };
-    let nb = ctx.bins;
-    let mut best: Option<Split> = None;
-    for k in 0..3 {
-        if binner.scale[k] == 0.0 {
-            continue;
-        }
-        // right_cost[i] = cost of bins i..nb as one side.
-        let mut right_cost = [0f32; MAX_BINS];
-        let mut acc = Aabb::EMPTY;
-        let mut n = 0u32;
-        for i in (1..nb).rev() {
-            acc = acc.union(&bins.bounds[k][i]);
-            n += bins.counts[k][i];
-            right_cost[i] = acc.half_area() * n as f32;
-        }
-        let mut acc = Aabb::EMPTY;
-        let mut n = 0u32;
-        for i in 1..nb {
-            acc = acc.union(&bins.bounds[k][i - 1]);
-            n += bins.counts[k][i - 1];
-            if n == 0 || n as usize == refs.len() {
-                continue;
-            }
-            let cost = acc.half_area() * n as f32 + right_cost[i];
-            if best.is_none_or(|b| cost < b.cost) {
-                best = Some(Split { axis: k, bin: i, cost });
-            }
-        }
-    }
-    best.map(|s| (s, binner))
-}
-
-/// Partitions `refs` by `split`; returns the size of the left part and both parts' infos.
-fn partition(refs: &mut [PrimRef], split: &Split, binner: &Binner) -> (usize, RangeInfo, RangeInfo) {
-    let (mut left, mut right) = (RangeInfo::EMPTY, RangeInfo::EMPTY);
-    let mut i = 0;
-    let mut j = refs.len();
+    let (axis, bin, cost) = best_bin_split(refs, &binner)?;
+    let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
+    let (mut i, mut j) = (0, refs.len());
     while i < j {
-        if binner.bin(refs[i].center2(), split.axis) < split.bin {
-            left.add(&refs[i]);
+        let r = refs[i];
+        if binner.bin(r.lo[axis] + r.hi[axis], axis) < bin {
+            left.add(&r);
             i += 1;
         } else {
             j -= 1;
             refs.swap(i, j);
-            right.add(&refs[j]);
+            right.add(&r);
         }
     }
-    (i, left, right)
+    (i > 0 && i < refs.len()).then_some(Split { mid: i, left: left.info(), right: right.info(), cost })
+}
+
+/// Exact SAH split of a small range: sort by centroid on each axis and sweep every position.
+fn sweep_split(refs: &mut [PrimRef]) -> Split {
+    let n = refs.len();
+    let mut best = (f32::INFINITY, 0usize, n / 2);
+    let mut right_area = [0f32; SMALL];
+    for k in 0..3 {
+        refs.sort_unstable_by(|a, b| (a.lo[k] + a.hi[k]).total_cmp(&(b.lo[k] + b.hi[k])).then(a.id.cmp(&b.id)));
+        let mut acc = B4::EMPTY;
+        for i in (1..n).rev() {
+            acc.grow(&B4::of(&refs[i]));
+            right_area[i] = acc.half_area();
+        }
+        let mut acc = B4::EMPTY;
+        for i in 1..n {
+            acc.grow(&B4::of(&refs[i - 1]));
+            let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
+            if cost < best.0 {
+                best = (cost, k, i);
+            }
+        }
+    }
+    let (cost, k, mid) = best;
+    if k != 2 {
+        refs.sort_unstable_by(|a, b| (a.lo[k] + a.hi[k]).total_cmp(&(b.lo[k] + b.hi[k])).then(a.id.cmp(&b.id)));
+    }
+    let cost = if cost.is_finite() { cost } else { f32::INFINITY };
+    Split { mid, left: RangeInfo::of(&refs[..mid]), right: RangeInfo::of(&refs[mid..]), cost }
 }
 
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
 /// halves, so it bounds depth and handles coincident centroids.
-fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> (usize, RangeInfo, RangeInfo) {
+fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     let mid = refs.len() / 2;
     let ext = [0, 1, 2].map(|k| info.centroids.hi[k] - info.centroids.lo[k]);
     let axis = (0..3).max_by(|&a, &b| ext[a].total_cmp(&ext[b])).unwrap_or(0);
     if ext[axis] > 0.0 {
-        refs.select_nth_unstable_by(mid, |a, b| a.center2()[axis].total_cmp(&b.center2()[axis]).then(a.id.cmp(&b.id)));
+        refs.select_nth_unstable_by(mid, |a, b| (a.lo[axis] + a.hi[axis]).total_cmp(&(b.lo[axis] + b.hi[axis])).then(a.id.cmp(&b.id)));
     }
-    (mid, RangeInfo::of(&refs[..mid]), RangeInfo::of(&refs[mid..]))
+    Split { mid, left: RangeInfo::of(&refs[..mid]), right: RangeInfo::of(&refs[mid..]), cost: f32::INFINITY }
+}
+
+fn split(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx, depth: u32) -> Split {
+    if depth >= MEDIAN_DEPTH {
+        return median_split(refs, info);
+    }
+    if refs.len() <= SMALL {
+        return sweep_split(refs);
+    }
+    binned_split(refs, info, ctx).unwrap_or_else(|| median_split(refs, info))
 }
 
 pub fn build(refs: &mut [PrimRef], bins: usize, max_leaf: usize) -> Tree {
@@ -196,23 +315,11 @@ pub fn build(refs: &mut [PrimRef], bins: usize, max_leaf: usize) -> Tree {
     Tree { root: Some(build_child(refs, 0, info, &ctx, 0)) }
 }
 
-/// One child-to-be of a node during filling.
+#[derive(Clone, Copy)]
 struct Part {
     begin: usize,
     end: usize,
     info: RangeInfo,
-}
-
-fn split_part(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx, depth: u32) -> (usize, RangeInfo, RangeInfo) {
-    if depth < MEDIAN_DEPTH {
-        if let Some((split, binner)) = find_split(refs, info, ctx) {
-            let (mid, l, r) = partition(refs, &split, &binner);
-            if mid > 0 && mid < refs.len() {
-                return (mid, l, r);
-            }
-        }
-    }
-    median_split(refs, info)
 }
 
 fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, depth: u32) -> (Aabb, Child) {
@@ -221,39 +328,55 @@ fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, dept
     if n <= 3 {
         return leaf;
     }
+    // The first split of this node; for a leaf-sized range it also decides, by the SAH,
+    // whether a leaf is cheaper.
+    let first = split(refs, &info, ctx, depth);
     if n <= ctx.max_leaf {
-        // SAH termination: a leaf when intersecting all is cheaper than the best split.
         let area = info.bounds.half_area();
-        match find_split(refs, &info, ctx) {
-            Some((split, _)) if TRAVERSAL_COST * area + split.cost < area * n as f32 => {}
-            _ => return leaf,
+        if !(TRAVERSAL_COST * area + first.cost < area * n as f32) {
+            return leaf;
         }
     }
-    let mut parts = vec![Part { begin: 0, end: n, info }];
-    while parts.len() < 4 {
-        let keys: Vec<(usize, usize, f32)> = parts.iter().map(|p| (p.begin, p.end, p.info.bounds.half_area())).collect();
-        let Some(i) = pick_child_to_split(&keys) else { break };
-        let (begin, end) = (parts[i].begin, parts[i].end);
-        let (mid, l, r) = split_part(&mut refs[begin..end], &parts[i].info, ctx, depth);
-        parts[i] = Part { begin, end: begin + mid, info: l };
-        parts.push(Part { begin: begin + mid, end, info: r });
+    let mut parts = [Part { begin: 0, end: 0, info: RangeInfo::EMPTY }; 4];
+    parts[0] = Part { begin: 0, end: first.mid, info: first.left };
+    parts[1] = Part { begin: first.mid, end: n, info: first.right };
+    let mut count = 2;
+    while count < 4 {
+        // Split the part with the largest area that has at least two primitives.
+        let mut pick = None;
+        let mut best_area = -1.0f32;
+        for (i, p) in parts[..count].iter().enumerate() {
+            let a = p.info.bounds.half_area();
+            if p.end - p.begin >= 2 && a > best_area {
+                best_area = a;
+                pick = Some(i);
+            }
+        }
+        let Some(i) = pick else { break };
+        let p = parts[i];
+        let s = split(&mut refs[p.begin..p.end], &p.info, ctx, depth);
+        parts[i] = Part { begin: p.begin, end: p.begin + s.mid, info: s.left };
+        parts[count] = Part { begin: p.begin + s.mid, end: p.end, info: s.right };
+        count += 1;
     }
+    let parts = &mut parts[..count];
     parts.sort_by_key(|p| p.begin);
     // Hand each part its own disjoint slice, then build them (in parallel when large).
-    let mut slices = Vec::with_capacity(parts.len());
+    let mut slices: [Option<(&mut [PrimRef], u32, RangeInfo)>; 4] = [None, None, None, None];
     let mut rest = refs;
     let mut at = 0;
-    for p in &parts {
+    for (slot, p) in slices.iter_mut().zip(parts.iter()) {
         let (_, tail) = rest.split_at_mut(p.begin - at);
         let (mine, tail) = tail.split_at_mut(p.end - p.begin);
-        slices.push((mine, base + p.begin as u32, p.info));
+        *slot = Some((mine, base + p.begin as u32, p.info));
         rest = tail;
         at = p.end;
     }
-    let children: Vec<(Aabb, Child)> = if n > PARALLEL_THRESHOLD {
-        slices.into_par_iter().map(|(s, b, i)| build_child(s, b, i, ctx, depth + 1)).collect()
+    let node = if n > PARALLEL_THRESHOLD {
+        let children: Vec<(Aabb, Child)> = slices.into_par_iter().flatten().map(|(s, b, i)| build_child(s, b, i, ctx, depth + 1)).collect();
+        InnerNode::new(children)
     } else {
-        slices.into_iter().map(|(s, b, i)| build_child(s, b, i, ctx, depth + 1)).collect()
+        InnerNode::new(slices.into_iter().flatten().map(|(s, b, i)| build_child(s, b, i, ctx, depth + 1)))
     };
-    (info.bounds, Child::Inner(Box::new(InnerNode { children })))
+    (info.bounds, Child::Inner(Box::new(node)))
 }

@@ -100,15 +100,3 @@ pub fn build(preset: &Preset, refs: &mut [PrimRef], keys: &mut [u64], keys_tmp: 
     };
     tree
 }
-
-/// Picks which of a node's children to split next: the largest by `area` among those with at
-/// least two primitives.
-pub(crate) fn pick_child_to_split(children: &[(usize, usize, f32)]) -> Option<usize> {
-    let mut best: Option<(usize, f32)> = None;
-    for (i, &(begin, end, area)) in children.iter().enumerate() {
-        if end - begin >= 2 && best.is_none_or(|(_, a)| area > a) {
-            best = Some((i, area));
-        }
-    }
-    best.map(|(i, _)| i)
-}

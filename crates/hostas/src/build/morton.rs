@@ -4,7 +4,7 @@
 
 use super::binned_sah::RangeInfo;
 use super::tree::{Child, InnerNode, Tree};
-use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef, pick_child_to_split};
+use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::math::Aabb;
 use rayon::prelude::*;
 
@@ -103,24 +103,27 @@ fn build_child(refs: &[PrimRef], codes: &[u64], base: u32, max_leaf: usize, dept
         }
         return (b, Child::Leaf { first: base, count: n as u32 });
     }
-    let mut parts: Vec<(usize, usize)> = vec![(0, n)];
-    while parts.len() < 4 {
+    let mut parts = [(0usize, n), (0, 0), (0, 0), (0, 0)];
+    for count in 1..4 {
         // Split the part with the most primitives (areas are not known top-down).
-        let keys: Vec<(usize, usize, f32)> = parts.iter().map(|&(b, e)| (b, e, (e - b) as f32)).collect();
-        let Some(i) = pick_child_to_split(&keys) else { break };
+        let Some(i) = (0..count).filter(|&i| parts[i].1 - parts[i].0 >= 2).max_by_key(|&i| (parts[i].1 - parts[i].0, usize::MAX - i)) else { break };
         let (b, e) = parts[i];
         let mid = if depth < MEDIAN_DEPTH { split_point(&codes[b..e]) } else { (e - b) / 2 };
         let mid = mid.clamp(1, e - b - 1);
         parts[i] = (b, b + mid);
-        parts.push((b + mid, e));
+        parts[count] = (b + mid, e);
     }
-    parts.sort();
+    parts.sort_by_key(|&(b, e)| (e == b, b));
     let build = |&(b, e): &(usize, usize)| build_child(&refs[b..e], &codes[b..e], base + b as u32, max_leaf, depth + 1);
-    let children: Vec<(Aabb, Child)> =
-        if n > PARALLEL_THRESHOLD { parts.par_iter().map(build).collect() } else { parts.iter().map(build).collect() };
+    let node = if n > PARALLEL_THRESHOLD {
+        let children: Vec<(Aabb, Child)> = parts.par_iter().filter(|p| p.1 > p.0).map(build).collect();
+        InnerNode::new(children)
+    } else {
+        InnerNode::new(parts.iter().filter(|p| p.1 > p.0).map(build))
+    };
     let mut bounds = Aabb::EMPTY;
-    for (b, _) in &children {
+    for (b, _) in node.children() {
         bounds = bounds.union(b);
     }
-    (bounds, Child::Inner(Box::new(InnerNode { children })))
+    (bounds, Child::Inner(Box::new(node)))
 }

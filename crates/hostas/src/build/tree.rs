@@ -11,9 +11,24 @@ pub enum Child {
 }
 
 /// An inner node with two to four children, each with its exact bounds.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct InnerNode {
-    pub children: Vec<(Aabb, Child)>,
+    slots: [(Aabb, Child); 4],
+    len: u8,
+}
+
+impl InnerNode {
+    pub fn new(children: impl IntoIterator<Item = (Aabb, Child)>) -> InnerNode {
+        let mut node = InnerNode { slots: std::array::from_fn(|_| (Aabb::EMPTY, Child::Leaf { first: 0, count: 0 })), len: 0 };
+        for c in children.into_iter().take(4) {
+            node.slots[node.len as usize] = c;
+            node.len += 1;
+        }
+        node
+    }
+    pub fn children(&self) -> &[(Aabb, Child)] {
+        &self.slots[..self.len as usize]
+    }
 }
 
 /// A built tree: `root` covers every stored primitive; `None` when there are none.
@@ -29,7 +44,7 @@ impl Tree {
             if let Child::Inner(n) = c {
                 *nodes += 1;
                 *max_depth = (*max_depth).max(depth);
-                for (_, ch) in &n.children {
+                for (_, ch) in n.children() {
                     walk(ch, depth + 1, nodes, max_depth);
                 }
             }

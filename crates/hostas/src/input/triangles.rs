@@ -153,6 +153,16 @@ impl<'a> TriangleReader<'a> {
             return Ok([base, base + 1, base + 2].map(|v| v + self.first_vertex));
         }
         let bytes = self.data.index_data.unwrap_or(&[]);
+        if self.index_size == 4 {
+            let at = (self.primitive_offset + base * 4) as usize;
+            if let Some(b) = bytes.get(at..at.saturating_add(12)) {
+                let raw = [0, 4, 8].map(|i| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as u64);
+                let out = raw.map(|r| r + self.first_vertex);
+                if out.iter().all(|&o| o <= self.data.max_vertex as u64) {
+                    return Ok(out);
+                }
+            }
+        }
         let mut out = [0u64; 3];
         for (k, o) in out.iter_mut().enumerate() {
             let at = self.primitive_offset + (base + k as u64) * self.index_size;
@@ -188,6 +198,13 @@ impl<'a> TriangleReader<'a> {
         let base = if self.index_size == 0 { self.primitive_offset } else { 0 };
         let at = base + v * self.data.vertex_stride;
         let start = usize::try_from(at).unwrap_or(usize::MAX);
+        // The common format, read directly.
+        if self.format.format == vk::Format::R32G32B32_SFLOAT {
+            if let Some(b) = self.data.vertex_data.get(start..start.saturating_add(12)) {
+                let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+                return Ok([f(0), f(4), f(8)]);
+            }
+        }
         self.data.vertex_data.get(start..).and_then(|s| self.format.decode(s)).ok_or(Error::RangeTooShort {
             what: "vertexData",
             needed: at.saturating_add(self.format.size as u64),

@@ -119,7 +119,7 @@ impl Writer<'_> {
         let Child::Inner(inner) = child else { return Ok(EMPTY_CHILD) };
         let index = self.alloc(depth)?;
         let mut node = Node::EMPTY;
-        for (k, (b, c)) in inner.children.iter().enumerate().take(4) {
+        for (k, (b, c)) in inner.children().iter().enumerate() {
             node.set_bounds(k, b);
             match c {
                 Child::Leaf { first, count } => {
