@@ -184,8 +184,16 @@ fn corrupted_serialized_data_never_panics() {
         }
         if let Ok(a) = device.deserialize(&bytes) {
             accepted += 1;
-            let top = device.statistics(a).map(|s| s.top_level).unwrap_or(false);
-            let tlas = if top { a } else { desc.build_tlas(&device, &vec![a; desc.blases.len()], FLAGS).unwrap() };
+            let stats = device.statistics(a);
+            let top = stats.as_ref().map(|s| s.top_level).unwrap_or(false);
+            let tlas = if top {
+                a
+            } else {
+                match desc.build_tlas(&device, &vec![a; desc.blases.len()], FLAGS) {
+                    Ok(t) => t,
+                    Err(e) => panic!("{e}: stats {stats:?}"),
+                }
+            };
             if let Ok(scene) = device.scene(tlas) {
                 for ray in &rays[..20] {
                     let _ = scene.trace_closest(ray);

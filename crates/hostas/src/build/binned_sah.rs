@@ -9,8 +9,6 @@ use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
 pub const MAX_BINS: usize = 32;
-/// SAH cost of traversing a node, relative to intersecting one primitive.
-pub const TRAVERSAL_COST: f32 = 1.0;
 /// Ranges up to this size are split by an exact sweep instead of binning.
 const SMALL: usize = 16;
 
@@ -106,6 +104,7 @@ impl RangeInfo {
 struct Ctx {
     bins: usize,
     max_leaf: usize,
+    traversal_cost: f32,
 }
 
 /// A two-way split of a range: `mid` primitives go left, with the infos of both sides and the
@@ -306,11 +305,11 @@ fn split(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx, depth: u32) -> Split
     binned_split(refs, info, ctx).unwrap_or_else(|| median_split(refs, info))
 }
 
-pub fn build(refs: &mut [PrimRef], bins: usize, max_leaf: usize) -> Tree {
+pub fn build(refs: &mut [PrimRef], bins: usize, max_leaf: usize, traversal_cost: f32) -> Tree {
     if refs.is_empty() {
         return Tree { root: None };
     }
-    let ctx = Ctx { bins: bins.clamp(2, MAX_BINS), max_leaf: max_leaf.max(4) };
+    let ctx = Ctx { bins: bins.clamp(2, MAX_BINS), max_leaf: max_leaf.clamp(4, crate::layout::MAX_LEAF_SIZE), traversal_cost };
     let info = RangeInfo::of(refs);
     Tree { root: Some(build_child(refs, 0, info, &ctx, 0)) }
 }
@@ -333,7 +332,7 @@ fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, dept
     let first = split(refs, &info, ctx, depth);
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
-        if !(TRAVERSAL_COST * area + first.cost < area * n as f32) {
+        if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
             return leaf;
         }
     }

@@ -47,23 +47,26 @@ pub enum Algorithm {
 }
 
 /// A named set of builder knobs.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Preset {
     pub name: &'static str,
     pub id: u32,
     pub algorithm: Algorithm,
     /// Leaves never hold more primitives than this.
     pub max_leaf: usize,
+    /// SAH cost of visiting a node relative to testing one primitive: higher values make
+    /// larger leaves and fewer nodes.
+    pub traversal_cost: f32,
 }
 
 impl Preset {
     pub const FAST_TRACE: Preset =
-        Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8 };
-    pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 4 };
+        Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8, traversal_cost: 1.0 };
+    pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 4, traversal_cost: 1.0 };
     pub const DEFAULT: Preset =
-        Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8 };
+        Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8, traversal_cost: 1.0 };
     pub const LOW_MEMORY: Preset =
-        Preset { name: "low-memory", id: 3, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 15 };
+        Preset { name: "low-memory", id: 3, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 15, traversal_cost: 6.0 };
     pub const ALL: [Preset; 4] = [Preset::FAST_TRACE, Preset::FAST_BUILD, Preset::DEFAULT, Preset::LOW_MEMORY];
 
     /// The preset the build flags select. `PREFER_FAST_TRACE` and `PREFER_FAST_BUILD` are
@@ -95,7 +98,7 @@ pub(crate) const MEDIAN_DEPTH: u32 = 40;
 /// position `i` (leaves refer to final positions). `keys` is working space of the same length.
 pub fn build(preset: &Preset, refs: &mut [PrimRef], keys: &mut [u64], keys_tmp: &mut [u64]) -> tree::Tree {
     let tree = match preset.algorithm {
-        Algorithm::BinnedSah { bins } => binned_sah::build(refs, bins, preset.max_leaf),
+        Algorithm::BinnedSah { bins } => binned_sah::build(refs, bins, preset.max_leaf, preset.traversal_cost),
         Algorithm::Morton => morton::build(refs, keys, keys_tmp, preset.max_leaf),
     };
     tree

@@ -93,6 +93,16 @@ impl<'a> View<'a> {
         if ends.iter().any(|&e| e > h.used_size) {
             return Err("a section ends past the used size".into());
         }
+        // Sections follow the header and each other, in the encoder's order, without overlap:
+        // a write into one (deserialization rewrites instance references) cannot reach another.
+        let starts = [h.geometries_offset, h.prims_offset, h.prim_ids_offset, h.nodes_offset];
+        let mut prev_end = HEADER_SIZE;
+        for (s, e) in starts.iter().zip(ends) {
+            if *s < prev_end || s % super::SECTION_ALIGN != 0 {
+                return Err(format!("section at {s} overlaps the previous one or is misaligned"));
+            }
+            prev_end = e;
+        }
 
         // Geometries: consecutive primitive ranges covering primitive_count.
         let mut next = 0u64;
