@@ -209,11 +209,24 @@ impl Scene {
         })
     }
 
+    /// Traces a batch of rays on all threads of the current rayon pool: closest hits, or any
+    /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order.
+    pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
+        use rayon::prelude::*;
+        rays.par_iter().with_min_len(256).map(|r| if any_hit { self.trace_any(r) } else { self.trace_closest(r) }).collect()
+    }
+
     /// Primitive kind of the BLAS behind stored instance `slot`, for statistics and tools.
     pub fn instance_prim_kind(&self, slot: u32) -> Option<PrimKind> {
         self.blas_view_for(slot).map(|v| v.prim_kind)
     }
 }
+
+// Scenes are shared by the threads that trace through them.
+const _: () = {
+    const fn assert_sync<T: Sync + Send>() {}
+    assert_sync::<Scene>();
+};
 
 impl Device {
     /// Locks `tlas` and the structures it references for tracing.
