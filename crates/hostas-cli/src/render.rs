@@ -102,9 +102,9 @@ pub fn sky(dir: V3, look: &Look) -> V3 {
 
 /// Default surface colour: the normal (as RGB) mixed with the instance's tint.
 pub fn default_albedo(s: &Surface, n: V3, look: &Look) -> V3 {
-    let tint = if look.tint_instances { instance_tint(s.hit.instance_id) } else { [0.82, 0.78, 0.7] };
+    let tint = if look.tint_instances { instance_tint(s.hit.instance_id) } else { [0.78, 0.58, 0.42] };
     let normal_rgb = [0.5 + 0.5 * n[0], 0.5 + 0.5 * n[1], 0.5 + 0.5 * n[2]];
-    let mut c = lerp(tint, normal_rgb, 0.42);
+    let mut c = lerp(tint, normal_rgb, 0.45);
     if look.mark_back_faces && !s.hit.front_face {
         c = mul(c, [1.0, 0.3, 0.3]);
     }
@@ -142,8 +142,8 @@ pub fn shade_ray(scene: &Scene, ray: &Ray, programs: &impl Programs, look: &Look
         }
     }
     let hemisphere = 0.5 + 0.5 * dot(n, look.up);
-    let ambient = lerp([0.2, 0.18, 0.16], [0.32, 0.38, 0.48], hemisphere);
-    let light = add(ambient, scale([1.0, 0.95, 0.85], 0.95 * lambert * visible));
+    let ambient = lerp([0.12, 0.11, 0.1], [0.24, 0.28, 0.36], hemisphere);
+    let light = add(ambient, scale([1.0, 0.95, 0.85], 0.8 * lambert * visible));
     Ok(mul(albedo, light))
 }
 

@@ -52,7 +52,9 @@ pub fn random_triangles(r: &mut Rand, n: usize, adversarial: bool) -> GeometryDe
     let mut positions = Vec::new();
     let mut indices = Vec::new();
     for i in 0..n {
-        let c = v3(r, 10.0);
+        // Adversarial scenes also place some triangles far away (large coordinates).
+        let far = if adversarial && r.gen_bool(0.05) { 1e4 } else { 1.0 };
+        let c = v3(r, 10.0).map(|x| x * far);
         let size = if adversarial && r.gen_bool(0.1) { [1e-4f32, 1e3, 1.0][r.gen_range(0..3)] } else { r.gen_range(0.2..3.0) };
         let mut tri = [0, 1, 2].map(|_| {
             let d = v3(r, size);

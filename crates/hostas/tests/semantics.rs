@@ -422,3 +422,20 @@ fn invalid_rays_are_rejected() {
         assert!(matches!(scene.trace_closest(&r), Err(hostas::Error::Validation { .. })));
     }
 }
+
+#[test]
+fn batch_tracing_matches_single_rays() {
+    let mut r = generate::rng(8);
+    let desc = generate::random_scene(&mut r, 500, true);
+    let device = Device::new();
+    let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
+    let scene = device.scene(built.tlas).unwrap();
+    let rays: Vec<Ray> = (0..2000).map(|_| generate::random_ray(&mut r, &desc)).collect();
+    for any in [false, true] {
+        let batch = scene.trace_batch(&rays, any).unwrap();
+        for (ray, hit) in rays.iter().zip(&batch) {
+            let single = if any { scene.trace_any(ray) } else { scene.trace_closest(ray) }.unwrap();
+            assert_eq!(*hit, single);
+        }
+    }
+}
