@@ -27,6 +27,7 @@ fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 
 fn main() {
     let n: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500);
+    let res: u32 = std::env::var("PERF_RES").ok().and_then(|s| s.parse().ok()).unwrap_or(512);
     // `perf N PRESET`: build that preset only (for instruction counts with `perf stat`).
     let only: Option<String> = std::env::args().nth(2);
     let (p, idx) = sphere(n);
@@ -50,9 +51,41 @@ fn main() {
             println!("{name}: {:.1} ms, SAH {:.2}, {} nodes", build * 1e3, s.sah_cost, s.node_count);
             continue;
         }
+        // Refit: an update (src == dst) after moving every vertex.
+        let moved: Vec<[f32; 3]> = p.iter().map(|v| [v[0] * 1.01, v[1] * 0.99, v[2]]).collect();
+        let ublas = hostas::quick::build_triangle_blas(&device, &p, &idx, flags | vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE).unwrap();
+        let geom = [hostas::Geometry::triangles(
+            hostas::TrianglesData {
+                vertex_format: vk::Format::R32G32B32_SFLOAT,
+                vertex_data: bytemuck::cast_slice(&moved),
+                vertex_stride: 12,
+                max_vertex: p.len() as u32 - 1,
+                index_type: vk::IndexType::UINT32,
+                index_data: Some(bytemuck::cast_slice(&idx)),
+                transform_data: None,
+            },
+            vk::GeometryFlagsKHR::OPAQUE,
+        )];
+        let range = [hostas::BuildRangeInfo { primitive_count: idx.len() as u32, ..Default::default() }];
+        let mut scratch = vec![0u8; 4096];
+        let t = Instant::now();
+        let info = hostas::BuildGeometryInfo {
+            ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            flags: flags | vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+            mode: vk::BuildAccelerationStructureModeKHR::UPDATE,
+            src: Some(ublas),
+            dst: Some(ublas),
+            geometries: &geom,
+            scratch: Some(&mut scratch),
+        };
+        device.build_acceleration_structures(&mut [info], &[&range]).unwrap();
+        let refit = tris / t.elapsed().as_secs_f64() / 1e6;
+        if std::env::var("PERF_REFIT_ONLY").is_ok() {
+            println!("{name}: refit {refit:.1} Mtris/s");
+            continue;
+        }
         let tlas = hostas::quick::build_single_instance_tlas(&device, blas).unwrap();
         let scene = device.scene(tlas).unwrap();
-        let res = 512;
         let t = Instant::now();
         let mut hits = 0;
         for y in 0..res {
@@ -77,7 +110,7 @@ fn main() {
         }
         let incoherent = (res * res) as f64 / t.elapsed().as_secs_f64() / 1e6;
         println!(
-            "{name:>11}: build {:7.1} ms ({:5.2} Mtris/s)  SAH {:6.2}  {:5.1} B/tri  depth {}  primary {:5.2} Mrays/s ({hits} hits)  incoherent {:5.2} Mrays/s",
+            "{name:>11}: build {:7.1} ms ({:5.2} Mtris/s)  SAH {:6.2}  {:5.1} B/tri  depth {}  primary {:5.2} Mrays/s ({hits} hits)  incoherent {:5.2} Mrays/s  refit {refit:5.1} Mtris/s",
             build * 1e3,
             tris / build / 1e6,
             s.sah_cost,

@@ -498,10 +498,12 @@ fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut 
                     let i = (c * CHUNK + j) as u32;
                     match reader {
                         Reader::Triangles(t) => {
-                            let v = t.triangle(i)?;
-                            let f: [f32; 9] = match v {
-                                Some(v) => [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]],
-                                None => [f32::NAN; 9],
+                            let f = match t.triangle_fast(i) {
+                                Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+                                _ => match t.triangle(i)? {
+                                    Some(v) => [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]],
+                                    None => [f32::NAN; 9],
+                                },
                             };
                             out.copy_from_slice(bytemuck::cast_slice(&f));
                         }
@@ -633,12 +635,17 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
                     let inactive = || Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at, "an active primitive became inactive in an update");
                     match &readers[g] {
                         Reader::Triangles(t) => {
-                            let v = t.triangle(p)?.ok_or_else(inactive)?;
-                            let f = [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]];
+                            let f = match t.triangle_fast(p) {
+                                Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+                                _ => {
+                                    let v = t.triangle(p)?.ok_or_else(inactive)?;
+                                    [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]]
+                                }
+                            };
                             out.copy_from_slice(bytemuck::cast_slice(&f));
-                            let mut bb = Aabb::point(v[0]);
-                            bb.grow(v[1]);
-                            bb.grow(v[2]);
+                            let mut bb = Aabb::point([f[0], f[1], f[2]]);
+                            bb.grow([f[3], f[4], f[5]]);
+                            bb.grow([f[6], f[7], f[8]]);
                             *b = bb;
                         }
                         Reader::Aabbs(a) => {

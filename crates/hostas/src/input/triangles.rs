@@ -213,6 +213,54 @@ impl<'a> TriangleReader<'a> {
         })
     }
 
+    /// Triangle `i` as nine floats, for the common layouts (`R32G32B32_SFLOAT` with 32-bit,
+    /// 16-bit or no indices), with no error path: `None` means "use [`Self::triangle`]", which
+    /// handles every format and reports what is wrong. An inactive triangle comes back with
+    /// its NaN in place; the caller tests `v[0]`, `v[3]`, `v[6]` (and the others, see
+    /// [`Self::triangle`]).
+    #[inline(always)]
+    pub fn triangle_fast(&self, i: u32) -> Option<[f32; 9]> {
+        if self.format.format != vk::Format::R32G32B32_SFLOAT {
+            return None;
+        }
+        let base = 3 * i as usize;
+        let idx: [usize; 3] = match self.index_size {
+            0 => [base, base + 1, base + 2].map(|v| v + self.first_vertex as usize),
+            4 => {
+                let at = self.primitive_offset as usize + base * 4;
+                let b = self.data.index_data?.get(at..at + 12)?;
+                [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]) as usize + self.first_vertex as usize)
+            }
+            _ => {
+                let at = self.primitive_offset as usize + base * 2;
+                let b = self.data.index_data?.get(at..at + 6)?;
+                [0, 2, 4].map(|k| u16::from_le_bytes([b[k], b[k + 1]]) as usize + self.first_vertex as usize)
+            }
+        };
+        let start = if self.index_size == 0 { self.primitive_offset as usize } else { 0 };
+        let stride = self.data.vertex_stride as usize;
+        let mut out = [0f32; 9];
+        for k in 0..3 {
+            if idx[k] > self.data.max_vertex as usize {
+                return None;
+            }
+            let at = start + idx[k] * stride;
+            let b = self.data.vertex_data.get(at..at + 12)?;
+            for c in 0..3 {
+                out[3 * k + c] = f32::from_le_bytes([b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]]);
+            }
+        }
+        if let Some(t) = &self.transform {
+            if !(out[0].is_nan() || out[3].is_nan() || out[6].is_nan()) {
+                for k in 0..3 {
+                    let p = t.point([out[3 * k], out[3 * k + 1], out[3 * k + 2]]);
+                    out[3 * k..3 * k + 3].copy_from_slice(&p);
+                }
+            }
+        }
+        Some(out)
+    }
+
     /// Triangle `i` in the structure's space (geometry transform applied), in index order.
     /// `None` for an inactive triangle: the X component of any vertex is NaN.
     #[inline]
