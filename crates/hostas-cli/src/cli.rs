@@ -36,7 +36,7 @@ pub struct Global {
     /// Worker threads for builds and tracing (default: all cores)
     #[arg(long, short = 'j', global = true, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=1024))]
     pub threads: Option<u32>,
-    /// No progress bars or informational messages on stderr
+    /// No progress bars or informational messages on stderr (reports on stdout stay)
     #[arg(long, short, global = true)]
     pub quiet: bool,
 }

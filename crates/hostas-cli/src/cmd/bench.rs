@@ -376,6 +376,7 @@ fn table_row(t: &mut Table, r: &Row) {
 
 pub fn run(a: BenchArgs) -> Result<()> {
     let mut sources: Vec<Source> = Vec::new();
+    let mut empty_dir = None;
     if a.meshes.is_empty() {
         if !a.no_builtin {
             sources.push(Source::Builtin(builtin_sphere));
@@ -385,6 +386,9 @@ pub fn run(a: BenchArgs) -> Result<()> {
         if dir.is_dir() {
             let found = shared_meshes(&dir)?;
             note!("meshes from {}: {}", dir.display(), found.len());
+            if found.is_empty() {
+                empty_dir = Some(dir.clone());
+            }
             sources.extend(found.into_iter().map(Source::File));
         } else if a.dir.is_some() {
             bail!("{}: not a directory", dir.display());
@@ -395,7 +399,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
         sources.extend(a.meshes.iter().cloned().map(Source::File));
     }
     if sources.is_empty() {
-        bail!("nothing to measure: no meshes given, and --no-builtin with no mesh directory");
+        match empty_dir {
+            Some(d) => bail!("nothing to measure: {} holds no meshes and --no-builtin was given", d.display()),
+            None => bail!("nothing to measure: no meshes given, and --no-builtin with no mesh directory"),
+        }
     }
     let threads = rayon::current_num_threads();
     note!("{} mesh(es) x {} preset(s) on {threads} thread(s)", sources.len(), a.presets.len());

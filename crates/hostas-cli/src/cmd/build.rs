@@ -103,16 +103,13 @@ pub fn run(a: BuildArgs) -> Result<()> {
     let container = Container::from_device(&device, &blases, tlas, bounds)?;
     let out = container.to_bytes();
     write_file(&a.output, &out)?;
-    if !progress::quiet() {
-        let names = crate::report::build_flag_names(flags.as_raw());
-        print(&format!(
-            "{}\nwrote {} ({}, {} triangles, flags: {})\n",
-            table.render(),
-            a.output.display(),
-            bytes(out.len() as u64),
-            thousands(total_tris),
-            if names.is_empty() { "none (default preset)".to_string() } else { names.join(" | ") }
-        ))?;
-    }
-    Ok(())
+    let names = crate::report::build_flag_names(flags.as_raw());
+    print(&format!(
+        "{}\nwrote {} ({}, {} triangles, flags: {})\n",
+        table.render(),
+        a.output.display(),
+        bytes(out.len() as u64),
+        thousands(total_tris),
+        if names.is_empty() { "none (default preset)".to_string() } else { names.join(" | ") }
+    ))
 }
