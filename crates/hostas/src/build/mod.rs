@@ -61,10 +61,10 @@ pub struct Preset {
 
 impl Preset {
     pub const FAST_TRACE: Preset =
-        Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8, traversal_cost: 1.0 };
+        Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8, traversal_cost: 2.0 };
     pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 4, traversal_cost: 1.0 };
     pub const DEFAULT: Preset =
-        Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8, traversal_cost: 1.0 };
+        Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8, traversal_cost: 3.0 };
     pub const LOW_MEMORY: Preset =
         Preset { name: "low-memory", id: 3, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 15, traversal_cost: 6.0 };
     pub const ALL: [Preset; 4] = [Preset::FAST_TRACE, Preset::FAST_BUILD, Preset::DEFAULT, Preset::LOW_MEMORY];

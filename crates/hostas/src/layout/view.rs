@@ -165,24 +165,62 @@ impl<'a> View<'a> {
     }
 }
 
+/// Where the sections of a validated structure are, so that a view can be made again from
+/// the same (unchanged, still locked) bytes without reading the header or walking the tree.
+#[derive(Clone, Debug)]
+pub struct Parts {
+    prim_kind: PrimKind,
+    geometries: std::ops::Range<usize>,
+    nodes: std::ops::Range<usize>,
+    prims: std::ops::Range<usize>,
+    prim_ids: std::ops::Range<usize>,
+}
+
 impl<'a> View<'a> {
-    /// Re-creates a view over bytes that [`View::parse`] accepted and that have not changed
-    /// since (the caller holds the memory's read lock): the section slices only, no walk.
-    pub fn reopen(bytes: &'a [u8]) -> Result<View<'a>, String> {
-        let header: &Header = bytemuck::try_from_bytes(bytes.get(..HEADER_SIZE as usize).ok_or("too short")?).map_err(|_| "misaligned")?;
-        let h = header;
-        let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or("unknown primitive kind")?;
-        let stored = h.stored_count as u64;
-        let geometries = section(bytes, h.geometries_offset, h.geometry_count as u64, "geometry")?;
-        let nodes = section(bytes, h.nodes_offset, h.node_count as u64, "node")?;
+    /// The section ranges of this view, for [`View::from_parts`].
+    pub fn parts(&self, base: &[u8]) -> Parts {
+        let range = |s: &[u8]| {
+            let start = s.as_ptr() as usize - base.as_ptr() as usize;
+            start..start + s.len()
+        };
+        let prims: &[u8] = match self.prim_kind {
+            PrimKind::Triangles => bytemuck::cast_slice(self.triangles),
+            PrimKind::Aabbs => bytemuck::cast_slice(self.aabbs),
+            PrimKind::Instances => bytemuck::cast_slice(self.instances),
+            PrimKind::None => &[],
+        };
+        Parts {
+            prim_kind: self.prim_kind,
+            geometries: range(bytemuck::cast_slice(self.geometries)),
+            nodes: range(bytemuck::cast_slice(self.nodes)),
+            prims: if prims.is_empty() { 0..0 } else { range(prims) },
+            prim_ids: range(bytemuck::cast_slice(self.prim_ids)),
+        }
+    }
+
+    /// The view again, from bytes [`View::parse`] accepted and that have not changed since.
+    /// `None` only if `bytes` are not those bytes.
+    #[inline]
+    pub fn from_parts(bytes: &'a [u8], p: &Parts) -> Option<View<'a>> {
+        let header: &Header = bytemuck::try_from_bytes(bytes.get(..HEADER_SIZE as usize)?).ok()?;
+        let cast = |r: &std::ops::Range<usize>| bytes.get(r.clone());
         let (mut triangles, mut aabbs, mut instances): (&[[f32; 9]], &[[f32; 6]], &[InstanceRecord]) = (&[], &[], &[]);
-        match prim_kind {
-            PrimKind::Triangles => triangles = section(bytes, h.prims_offset, stored, "triangle")?,
-            PrimKind::Aabbs => aabbs = section(bytes, h.prims_offset, stored, "AABB")?,
-            PrimKind::Instances => instances = section(bytes, h.prims_offset, stored, "instance")?,
+        let prims = cast(&p.prims)?;
+        match p.prim_kind {
+            PrimKind::Triangles => triangles = bytemuck::try_cast_slice(prims).ok()?,
+            PrimKind::Aabbs => aabbs = bytemuck::try_cast_slice(prims).ok()?,
+            PrimKind::Instances => instances = bytemuck::try_cast_slice(prims).ok()?,
             PrimKind::None => {}
         }
-        let prim_ids = section(bytes, h.prim_ids_offset, stored, "primitive id")?;
-        Ok(View { header, prim_kind, geometries, nodes, triangles, aabbs, instances, prim_ids })
+        Some(View {
+            header,
+            prim_kind: p.prim_kind,
+            geometries: bytemuck::try_cast_slice(cast(&p.geometries)?).ok()?,
+            nodes: bytemuck::try_cast_slice(cast(&p.nodes)?).ok()?,
+            triangles,
+            aabbs,
+            instances,
+            prim_ids: bytemuck::try_cast_slice(cast(&p.prim_ids)?).ok()?,
+        })
     }
 }

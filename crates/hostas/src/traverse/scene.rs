@@ -7,7 +7,7 @@ use super::query::{CommittedType, RayQuery};
 use super::{Ray, RayFlags};
 use crate::device::{AccelerationStructure, Device};
 use crate::error::{Error, Result};
-use crate::layout::view::View;
+use crate::layout::view::{Parts, View};
 use crate::layout::{Kind, PrimKind};
 use crate::memory::HostMemory;
 use parking_lot::RawRwLock;
@@ -22,6 +22,7 @@ type Guard = ArcRwLockReadGuard<RawRwLock, HostMemory>;
 struct Region {
     memory: usize,
     range: Range<usize>,
+    parts: Parts,
 }
 
 /// A top-level structure ready for tracing. Holds read locks on the memory of every structure
@@ -90,9 +91,10 @@ impl Scene {
         let obj = device.object(tlas)?;
         let mem = obj.buffer.memory().ok_or_else(|| Error::NotBuilt { handle: tlas.0, reason: "its buffer has no memory bound".into() })?;
         let m = Scene::lock(&mut guards, &mem, tlas.0)?;
-        let region = Region { memory: m, range: obj.offset as usize..(obj.offset + obj.size) as usize };
-        let bytes = &guards[m].1.bytes()[region.range.clone()];
+        let range = obj.offset as usize..(obj.offset + obj.size) as usize;
+        let bytes = &guards[m].1.bytes()[range.clone()];
         let view = View::parse(bytes).map_err(|reason| Error::NotBuilt { handle: tlas.0, reason })?;
+        let region = Region { memory: m, range, parts: view.parts(bytes) };
         if view.header.kind != Kind::TopLevel as u32 {
             return Err(Error::NotBuilt { handle: tlas.0, reason: "ray queries need a top-level structure".into() });
         }
@@ -110,8 +112,9 @@ impl Scene {
                 let mem = o.buffer.memory()?;
                 let m = Scene::lock(&mut guards, &mem, r).ok()?;
                 let range = o.offset as usize..(o.offset + o.size) as usize;
-                let v = View::parse(&guards[m].1.bytes()[range.clone()]).ok()?;
-                (v.header.kind == Kind::BottomLevel as u32).then_some(Region { memory: m, range })
+                let bytes = &guards[m].1.bytes()[range.clone()];
+                let v = View::parse(bytes).ok()?;
+                (v.header.kind == Kind::BottomLevel as u32).then_some(Region { memory: m, range, parts: v.parts(bytes) })
             })();
             match resolved {
                 Some(region) => {
@@ -138,12 +141,14 @@ impl Scene {
     }
 
     pub(crate) fn tlas_view(&self) -> Option<View<'_>> {
-        View::reopen(self.bytes(self.tlas.as_ref()?)).ok()
+        let r = self.tlas.as_ref()?;
+        View::from_parts(self.bytes(r), &r.parts)
     }
 
     pub(crate) fn blas_view_for(&self, instance_slot: u32) -> Option<View<'_>> {
         let b = *self.instance_blas.get(instance_slot as usize)?;
-        View::reopen(self.bytes(self.blases.get(b as usize)?)).ok()
+        let r = self.blases.get(b as usize)?;
+        View::from_parts(self.bytes(r), &r.parts)
     }
 
     /// A ray query over this scene (`rayQueryInitializeEXT`).
