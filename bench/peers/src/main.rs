@@ -30,7 +30,7 @@ pub enum SahProxy {
 const LIBS: [&str; 4] = ["hostas", "embree", "tinybvh", "obvhs"];
 
 /// Variants run on the crown (3.5M triangles) unless --full-crown or --variants is given.
-const CROWN_DEFAULT: &str = "hostas,embree:MEDIUM";
+const CROWN_DEFAULT: &str = "hostas:default,embree:MEDIUM";
 
 #[derive(Parser, Debug)]
 #[command(name = "hostas-peers", about = "hostas vs Embree 3, tinybvh and obvhs: build, SAH, bytes, trace, refit")]
@@ -54,6 +54,9 @@ struct Args {
     /// Timed repetitions on scenes of --big-tris triangles or more.
     #[arg(long, default_value_t = 3)]
     big_reps: usize,
+    /// Warm-up repetitions on big scenes (the median of 3 already drops one cold outlier).
+    #[arg(long, default_value_t = 0)]
+    big_warmup: usize,
     /// Repetitions for the spatial-split builders (Embree HIGH, tinybvh BuildHQ).
     #[arg(long, default_value_t = 3)]
     slow_reps: usize,
@@ -195,10 +198,11 @@ fn main() {
         let mut notes = Vec::new();
         if sc.tri_count() >= args.big_tris {
             cfg.reps = args.big_reps.max(1);
+            cfg.warmup = args.big_warmup;
             cfg.slow_reps = args.big_slow_reps.max(1);
             notes.push(format!(
-                "big scene: builds and refits median of {} ({} for Embree HIGH / tinybvh BuildHQ)",
-                cfg.reps, cfg.slow_reps
+                "big scene: builds and refits median of {} after {} warm-up ({} for Embree HIGH / tinybvh BuildHQ)",
+                cfg.reps, cfg.warmup, cfg.slow_reps
             ));
         }
         if name == "crown" && !args.full_crown && args.variants.is_none() {
