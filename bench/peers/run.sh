@@ -14,6 +14,10 @@ if ! dpkg -s libembree-dev >/dev/null 2>&1; then
     exit 1
 fi
 export RUSTFLAGS="${RUSTFLAGS:-} -C target-cpu=native"
+# The hostas revision measured, for the report header (a "+" marks uncommitted core changes).
+rev=$(git rev-parse --short HEAD 2>/dev/null || echo unknown)
+if [ -n "$(git status --porcelain -- ../../crates/hostas 2>/dev/null)" ]; then rev="$rev+"; fi
+export PEERS_GIT_REV="git $rev"
 features="${PEERS_FEATURES-hostas,cli-mesh}"
 t0=$(date +%s)
 cargo build --release -j "${PEERS_JOBS:-2}" --no-default-features --features "$features" 1>&2

@@ -172,6 +172,11 @@ fn main() {
         base.passes
     );
     println!(
+        "Versions: Embree {}, tinybvh 1.6.8 (tinybvh-rs 0.1.0-beta.3 header, C++ shim), obvhs 0.4.0, hostas {}.",
+        peers::embree::version(),
+        option_env!("PEERS_GIT_REV").unwrap_or("(git revision unknown)")
+    );
+    println!(
         "SAH(1,1) = sum over interior nodes of A/A(root) x C_trav + sum over leaves of A/A(root) x N x C_isect, with C_trav = C_isect = 1, on each library's binary tree (Embree: rtcBuildBVH proxy; hostas: the value hostas reports). B/tri = bytes of the traced structure / triangles. Mesh loader: {}. Mesh folder: {}{}",
         mesh::LOADER,
         mesh_dir.display(),
@@ -209,6 +214,7 @@ fn main() {
             cfg.variants = Some(CROWN_DEFAULT.split(',').map(String::from).collect());
             notes.push(format!("crown: only {CROWN_DEFAULT} by default, to fit the time budget (--full-crown runs all)"));
         }
+        let load_start = util::loadavg();
         let load_s = t_scene.elapsed().as_secs_f64();
         let rays = rays::generate(&sc, args.rays);
         eprintln!("[{:6.1}s] scene {} ({} tris, loaded in {:.1}s)", started.elapsed().as_secs_f64(), sc.name, sc.tri_count(), load_s);
@@ -246,6 +252,10 @@ fn main() {
             notes,
             seconds: 0.0,
         };
+        if let (Some(a), Some(b)) = (load_start, util::loadavg()) {
+            let busy = if a.max(b) > all_threads as f64 + 0.5 { " (the machine was busy with other work: expect depressed, noisy figures, the all-thread ones first)" } else { "" };
+            rep.notes.push(format!("1-minute load average at scene start / end: {a:.2} / {b:.2}{busy}"));
+        }
         rep.finish();
         rep.seconds = t_scene.elapsed().as_secs_f64();
         print!("{}", rep.markdown());

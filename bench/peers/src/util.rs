@@ -80,3 +80,8 @@ pub fn pool(n: usize) -> rayon::ThreadPool {
 pub fn available_threads() -> usize {
     std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
 }
+
+/// The 1-minute load average (Linux), to flag runs on a busy machine.
+pub fn loadavg() -> Option<f64> {
+    std::fs::read_to_string("/proc/loadavg").ok()?.split_whitespace().next()?.parse().ok()
+}

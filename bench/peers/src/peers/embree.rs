@@ -98,6 +98,13 @@ impl Drop for Device {
     }
 }
 
+/// "3.13.5" and the like, from a throw-away device.
+pub fn version() -> String {
+    let d = Device::new(1);
+    let v = unsafe { rtcGetDeviceProperty(d.dev, RTCDeviceProperty::VERSION) };
+    format!("{}.{}.{}", v / 10000, v / 100 % 100, v % 100)
+}
+
 /// A scene over the shared buffers, not yet committed. `verts` must outlive the scene.
 fn new_scene(
     d: &Device,

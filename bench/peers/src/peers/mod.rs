@@ -1,4 +1,8 @@
 pub mod embree;
+#[cfg(feature = "hostas")]
+pub mod hostas;
+#[cfg(not(feature = "hostas"))]
+#[path = "hostas_stub.rs"]
 pub mod hostas;
 pub mod obvhs;
 pub mod tinybvh;
