@@ -219,3 +219,27 @@ fn coincident_primitives() {
         }
     }
 }
+
+/// A scene large enough for the builders' parallel paths (parallel binning, partitioning and
+/// encoding of big ranges), checked on fewer rays.
+#[test]
+fn large_blas_matches_oracle() {
+    let mut r = generate::rng(99);
+    let desc = SceneDesc {
+        blases: vec![hostas_testkit::BlasDesc { geometries: vec![generate::random_triangles(&mut r, 100_000, true), generate::random_triangles(&mut r, 10_000, false)] }],
+        instances: vec![hostas_testkit::InstanceDesc::identity(0), hostas_testkit::InstanceDesc { transform: generate::random_transform(&mut r, true), ..hostas_testkit::InstanceDesc::identity(0) }],
+    };
+    CURRENT.with(|c| *c.borrow_mut() = desc.instances.iter().map(|i| (i.custom_index, i.sbt_record_offset)).collect());
+    let device = Device::new();
+    let oracle = Oracle::new(&desc);
+    for preset in PRESETS {
+        let built = desc.build(&device, preset, preset).unwrap();
+        let scene = device.scene(built.tlas).unwrap();
+        for _ in 0..12 {
+            let mut ray = generate::random_ray(&mut r, &desc);
+            ray.flags = generate::random_flags(&mut r);
+            check_closest(&scene, &oracle, &ray, &preset).unwrap();
+            check_candidates(&scene, &oracle, &ray, &preset).unwrap();
+        }
+    }
+}

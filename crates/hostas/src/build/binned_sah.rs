@@ -229,8 +229,51 @@ fn best_bin_split(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f3
     }
 }
 
-/// Binned split, partitioning `refs` in place.
-fn binned_split(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx) -> Option<Split> {
+/// Partitions a large range on all threads: count each chunk's left side, then scatter every
+/// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
+/// sequential stable partition, whatever the thread count.
+fn parallel_partition(refs: &mut [PrimRef], aux: &mut [PrimRef], left_of: impl Fn(&PrimRef) -> bool + Sync) -> (usize, RangeInfo, RangeInfo) {
+    const CHUNK: usize = PARALLEL_THRESHOLD * 4;
+    let lefts: Vec<usize> = refs.par_chunks(CHUNK).map(|c| c.iter().filter(|r| left_of(r)).count()).collect();
+    let total_left: usize = lefts.iter().sum();
+    // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
+    let (mut left_part, mut right_part) = aux.split_at_mut(total_left);
+    let mut pieces = Vec::with_capacity(lefts.len());
+    for (i, n) in lefts.iter().enumerate() {
+        let len = CHUNK.min(refs.len() - i * CHUNK);
+        let (lp, lrest) = left_part.split_at_mut(*n);
+        let (rp, rrest) = right_part.split_at_mut(len - n);
+        pieces.push((lp, rp));
+        left_part = lrest;
+        right_part = rrest;
+    }
+    let infos: Vec<(Acc, Acc)> = refs
+        .par_chunks(CHUNK)
+        .zip(pieces.into_par_iter())
+        .map(|(c, (lp, rp))| {
+            let (mut la, mut ra) = (Acc::EMPTY, Acc::EMPTY);
+            let (mut li, mut ri) = (0, 0);
+            for r in c {
+                if left_of(r) {
+                    lp[li] = *r;
+                    li += 1;
+                    la.add(r);
+                } else {
+                    rp[ri] = *r;
+                    ri += 1;
+                    ra.add(r);
+                }
+            }
+            (la, ra)
+        })
+        .collect();
+    refs.par_chunks_mut(CHUNK).zip(aux.par_chunks(CHUNK)).for_each(|(d, s)| d.copy_from_slice(s));
+    let (left, right) = infos.iter().fold((RangeInfo::EMPTY, RangeInfo::EMPTY), |(l, r), (a, b)| (RangeInfo::merge(l, a.info()), RangeInfo::merge(r, b.info())));
+    (total_left, left, right)
+}
+
+/// Binned split, partitioning `refs` in place (through `aux` when large).
+fn binned_split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx) -> Option<Split> {
     // Small ranges gain nothing from many bins; they only pay for sweeping them.
     let bins = if refs.len() < 256 { ctx.bins.min(8) } else { ctx.bins };
     let binner = Binner::new(&info.centroids, bins);
@@ -238,6 +281,10 @@ fn binned_split(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx) -> Option<Spl
         return None;
     }
     let (axis, bin, cost) = best_bin_split(refs, &binner)?;
+    if refs.len() > PARALLEL_THRESHOLD * 16 {
+        let (mid, left, right) = parallel_partition(refs, aux, |r| binner.bin(r.lo[axis] + r.hi[axis], axis) < bin);
+        return (mid > 0 && mid < refs.len()).then_some(Split { mid, left, right, cost });
+    }
     let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
     let (mut i, mut j) = (0, refs.len());
     while i < j {
@@ -295,23 +342,23 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     Split { mid, left: RangeInfo::of(&refs[..mid]), right: RangeInfo::of(&refs[mid..]), cost: f32::INFINITY }
 }
 
-fn split(refs: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx, depth: u32) -> Split {
+fn split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx, depth: u32) -> Split {
     if depth >= MEDIAN_DEPTH {
         return median_split(refs, info);
     }
     if refs.len() <= SMALL {
         return sweep_split(refs);
     }
-    binned_split(refs, info, ctx).unwrap_or_else(|| median_split(refs, info))
+    binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info))
 }
 
-pub fn build(refs: &mut [PrimRef], bins: usize, max_leaf: usize, traversal_cost: f32) -> Tree {
+pub fn build(refs: &mut [PrimRef], aux: &mut [PrimRef], bins: usize, max_leaf: usize, traversal_cost: f32) -> Tree {
     if refs.is_empty() {
         return Tree { root: None };
     }
     let ctx = Ctx { bins: bins.clamp(2, MAX_BINS), max_leaf: max_leaf.clamp(4, crate::layout::MAX_LEAF_SIZE), traversal_cost };
     let info = RangeInfo::of(refs);
-    Tree { root: Some(build_child(refs, 0, info, &ctx, 0)) }
+    Tree { root: Some(build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0)) }
 }
 
 #[derive(Clone, Copy)]
@@ -321,7 +368,7 @@ struct Part {
     info: RangeInfo,
 }
 
-fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, depth: u32) -> (Aabb, Child) {
+fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, depth: u32) -> (Aabb, Child) {
     let n = refs.len();
     let leaf = (info.bounds, Child::Leaf { first: base, count: n as u32 });
     if n <= 3 {
@@ -329,7 +376,7 @@ fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, dept
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
-    let first = split(refs, &info, ctx, depth);
+    let first = split(refs, aux, &info, ctx, depth);
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
         if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
@@ -353,7 +400,7 @@ fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, dept
         }
         let Some(i) = pick else { break };
         let p = parts[i];
-        let s = split(&mut refs[p.begin..p.end], &p.info, ctx, depth);
+        let s = split(&mut refs[p.begin..p.end], &mut aux[p.begin..p.end], &p.info, ctx, depth);
         parts[i] = Part { begin: p.begin, end: p.begin + s.mid, info: s.left };
         parts[count] = Part { begin: p.begin + s.mid, end: p.end, info: s.right };
         count += 1;
@@ -361,21 +408,25 @@ fn build_child(refs: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, dept
     let parts = &mut parts[..count];
     parts.sort_by_key(|p| p.begin);
     // Hand each part its own disjoint slice, then build them (in parallel when large).
-    let mut slices: [Option<(&mut [PrimRef], u32, RangeInfo)>; 4] = [None, None, None, None];
-    let mut rest = refs;
+    type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
+    let mut slices: [Slot; 4] = [None, None, None, None];
+    let (mut rest, mut aux_rest) = (refs, aux);
     let mut at = 0;
     for (slot, p) in slices.iter_mut().zip(parts.iter()) {
         let (_, tail) = rest.split_at_mut(p.begin - at);
         let (mine, tail) = tail.split_at_mut(p.end - p.begin);
-        *slot = Some((mine, base + p.begin as u32, p.info));
+        let (_, atail) = aux_rest.split_at_mut(p.begin - at);
+        let (amine, atail) = atail.split_at_mut(p.end - p.begin);
+        *slot = Some((mine, amine, base + p.begin as u32, p.info));
         rest = tail;
+        aux_rest = atail;
         at = p.end;
     }
     let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> = slices.into_par_iter().flatten().map(|(s, b, i)| build_child(s, b, i, ctx, depth + 1)).collect();
+        let children: Vec<(Aabb, Child)> = slices.into_par_iter().flatten().map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)).collect();
         InnerNode::new(children)
     } else {
-        InnerNode::new(slices.into_iter().flatten().map(|(s, b, i)| build_child(s, b, i, ctx, depth + 1)))
+        InnerNode::new(slices.into_iter().flatten().map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)))
     };
     (info.bounds, Child::Inner(Box::new(node)))
 }

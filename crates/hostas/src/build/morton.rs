@@ -45,7 +45,7 @@ fn radix_sort(keys: &mut [u64], tmp: &mut [u64]) {
     // Four passes: the sorted data is back in `keys`.
 }
 
-pub fn build(refs: &mut [PrimRef], keys: &mut [u64], tmp: &mut [u64], max_leaf: usize) -> Tree {
+pub fn build(refs: &mut [PrimRef], aux: &mut [PrimRef], keys: &mut [u64], tmp: &mut [u64], max_leaf: usize) -> Tree {
     let n = refs.len();
     if n == 0 {
         return Tree { root: None };
@@ -65,16 +65,13 @@ pub fn build(refs: &mut [PrimRef], keys: &mut [u64], tmp: &mut [u64], max_leaf: 
         *k = (code(r) as u64) << 32 | i as u64;
     });
     radix_sort(&mut keys[..n], tmp);
-    // Put the references in sorted order, so leaves read their bounds sequentially.
+    // The sorted codes, for splitting.
     tmp[..n].par_iter_mut().zip(keys[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(t, k)| {
         *t = k >> 32;
     });
-    {
-        // Permute refs by the sorted keys through the scratch-free trick of sorting copies
-        // of the references: cheap next to the build itself.
-        let sorted: Vec<PrimRef> = keys[..n].iter().map(|k| refs[(*k & 0xffff_ffff) as usize]).collect();
-        refs.copy_from_slice(&sorted);
-    }
+    // Put the references in sorted order, so leaves read their bounds sequentially.
+    aux[..n].par_iter_mut().zip(keys[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(a, k)| *a = refs[(*k & 0xffff_ffff) as usize]);
+    refs.par_iter_mut().zip(aux[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(r, a)| *r = *a);
     let codes = &tmp[..n];
     let root = build_child(refs, codes, 0, max_leaf.max(4), 0);
     Tree { root: Some(root) }

@@ -15,12 +15,18 @@ pub enum Child {
 pub struct InnerNode {
     slots: [(Aabb, Child); 4],
     len: u8,
+    /// Inner nodes in this subtree, this one included (the encoder lays subtrees out
+    /// side by side from it).
+    pub nodes: u32,
 }
 
 impl InnerNode {
     pub fn new(children: impl IntoIterator<Item = (Aabb, Child)>) -> InnerNode {
-        let mut node = InnerNode { slots: std::array::from_fn(|_| (Aabb::EMPTY, Child::Leaf { first: 0, count: 0 })), len: 0 };
+        let mut node = InnerNode { slots: std::array::from_fn(|_| (Aabb::EMPTY, Child::Leaf { first: 0, count: 0 })), len: 0, nodes: 1 };
         for c in children.into_iter().take(4) {
+            if let Child::Inner(n) = &c.1 {
+                node.nodes += n.nodes;
+            }
             node.slots[node.len as usize] = c;
             node.len += 1;
         }

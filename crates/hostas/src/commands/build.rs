@@ -31,12 +31,12 @@ pub struct BuildSizes {
 /// Decoded primitive data as it sits in scratch, indexed by primitive sequence number.
 const TRI_BYTES: usize = 36;
 
-/// Build scratch: a `PrimRef` (32 bytes), two sort keys (8 bytes each) and the decoded
-/// primitive per primitive, each array 64-byte aligned, plus room to align the start of
-/// whatever address the application gives.
+/// Build scratch: per primitive a `PrimRef` and a second one to partition into (32 bytes
+/// each), two sort keys (8 bytes each) and the decoded primitive, each array 64-byte aligned,
+/// plus room to align the start of whatever address the application gives.
 fn build_scratch_size(k: PrimKind, n: u64) -> u64 {
     use crate::layout::align_up;
-    64 + align_up(32 * n, 64) + 2 * align_up(8 * n, 64) + align_up(k.prim_size() * n, 64)
+    64 + 2 * align_up(32 * n, 64) + 2 * align_up(8 * n, 64) + align_up(k.prim_size() * n, 64)
 }
 
 /// One geometry's reader.
@@ -325,7 +325,7 @@ impl Device {
             ));
         }
         let n = total as usize;
-        let (refs, keys, keys_tmp, data) = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
+        let Scratch { refs, aux, keys, keys_tmp, data } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
 
         // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
         let mut active = vec![false; 0];
@@ -356,7 +356,7 @@ impl Device {
         let stored = active.len();
         let preset = Preset::from_flags(flags);
         let refs = &mut refs[..stored];
-        let tree = build::build(&preset, refs, &mut keys[..stored], &mut keys_tmp[..stored]);
+        let tree = build::build(&preset, refs, &mut aux[..stored], &mut keys[..stored], &mut keys_tmp[..stored]);
 
         let fields = HeaderFields {
             kind: kind as u32,
@@ -449,8 +449,17 @@ impl Device {
     }
 }
 
-/// Splits scratch into aligned arrays: refs, keys, key buffer, primitive data.
-fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<(&mut [PrimRef], &mut [u64], &mut [u64], &mut [u8])> {
+/// The arrays a build keeps in scratch.
+struct Scratch<'s> {
+    refs: &'s mut [PrimRef],
+    aux: &'s mut [PrimRef],
+    keys: &'s mut [u64],
+    keys_tmp: &'s mut [u64],
+    data: &'s mut [u8],
+}
+
+/// Splits scratch into aligned arrays: refs, partition buffer, keys, key buffer, primitive data.
+fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scratch<'_>> {
     let misalign = scratch.as_ptr().align_offset(64).min(scratch.len());
     let s = &mut scratch[misalign..];
     let carve = |s: &mut [u8], bytes: usize| -> Result<(usize, usize)> {
@@ -459,20 +468,22 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<(&mut
     };
     let (r_len, _) = carve(s, 32 * n)?;
     let (k_len, _) = carve(s, 8 * n)?;
-    if s.len() < r_len + 2 * k_len + prim_size * n {
-        return Err(Error::RangeTooShort { what: "scratch", needed: (r_len + 2 * k_len + prim_size * n) as u64, available: s.len() as u64, location: Location::NONE });
+    if s.len() < 2 * r_len + 2 * k_len + prim_size * n {
+        return Err(Error::RangeTooShort { what: "scratch", needed: (2 * r_len + 2 * k_len + prim_size * n) as u64, available: s.len() as u64, location: Location::NONE });
     }
     let (r, rest) = s.split_at_mut(r_len);
+    let (a, rest) = rest.split_at_mut(r_len);
     let (k, rest) = rest.split_at_mut(k_len);
     let (kt, rest) = rest.split_at_mut(k_len);
     let data = &mut rest[..prim_size * n];
     let cast_err = |e: bytemuck::PodCastError| Error::NotSupported(format!("scratch alignment: {e}"));
-    Ok((
-        bytemuck::try_cast_slice_mut(&mut r[..32 * n]).map_err(cast_err)?,
-        bytemuck::try_cast_slice_mut(&mut k[..8 * n]).map_err(cast_err)?,
-        bytemuck::try_cast_slice_mut(&mut kt[..8 * n]).map_err(cast_err)?,
+    Ok(Scratch {
+        refs: bytemuck::try_cast_slice_mut(&mut r[..32 * n]).map_err(cast_err)?,
+        aux: bytemuck::try_cast_slice_mut(&mut a[..32 * n]).map_err(cast_err)?,
+        keys: bytemuck::try_cast_slice_mut(&mut k[..8 * n]).map_err(cast_err)?,
+        keys_tmp: bytemuck::try_cast_slice_mut(&mut kt[..8 * n]).map_err(cast_err)?,
         data,
-    ))
+    })
 }
 
 /// Decodes all triangles or AABBs into `data` (indexed by sequence number) and writes a

@@ -3,8 +3,9 @@
 //! Nothing is assumed about the previous contents of the memory.
 
 use super::plan::Plan;
-use super::{EMPTY_CHILD, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, GeometryRecord};
-use crate::build::tree::{Child, Tree};
+use super::{HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, GeometryRecord};
+use crate::build::tree::{Child, InnerNode, Tree};
+use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::math::Aabb;
 
@@ -36,28 +37,33 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
     let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut dst[plan.nodes_offset as usize..(plan.nodes_offset + 128 * plan.node_capacity) as usize])
         .map_err(|e| Error::NotSupported(format!("acceleration structure memory is not 64-byte aligned ({e})")))?;
 
-    let mut w = Writer { nodes, count: 0, depth: 0, sah: 0.0, root_area: 0.0 };
-    let bounds = match &tree.root {
-        None => Aabb::EMPTY,
-        Some((b, child)) => {
-            w.root_area = b.half_area();
-            match child {
-                Child::Inner(_) => {
-                    w.write(child, 1)?;
+    let root_area = match &tree.root {
+        Some((b, _)) => b.half_area(),
+        None => 0.0,
+    };
+    let w = Writer { root_area };
+    let (bounds, node_count, depth, sah) = match &tree.root {
+        None => (Aabb::EMPTY, 0, 0, 0.0),
+        Some((b, child)) => match child {
+            Child::Inner(inner) => {
+                let count = inner.nodes as usize;
+                if count > nodes.len() {
+                    return Err(Error::OutOfHostMemory(format!("tree needs {count} nodes, the plan has {}", nodes.len())));
                 }
-                Child::Leaf { first, count } => {
-                    // A single leaf still gets a node, so traversal always starts at node 0.
-                    let mut node = Node::EMPTY;
-                    node.set_bounds(0, b);
-                    node.child[0] = LEAF_BIT | first;
-                    node.count[0] = *count as u8;
-                    w.alloc(1)?;
-                    w.nodes[0] = node;
-                    w.sah += SAH_NODE_COST + SAH_PRIM_COST * *count as f32;
-                }
+                let (sah, depth) = w.write(inner, &mut nodes[..count], 0, 1)?;
+                (*b, count as u32, depth, sah + SAH_NODE_COST)
             }
-            *b
-        }
+            Child::Leaf { first, count } => {
+                // A single leaf still gets a node, so traversal always starts at node 0.
+                let mut node = Node::EMPTY;
+                node.set_bounds(0, b);
+                node.child[0] = LEAF_BIT | first;
+                node.count[0] = *count as u8;
+                let slot = nodes.first_mut().ok_or_else(|| Error::OutOfHostMemory("no room for the root node".into()))?;
+                *slot = node;
+                (*b, 1, 1, SAH_NODE_COST + SAH_PRIM_COST * *count as f32)
+            }
+        },
     };
     let header = Header {
         magic: MAGIC,
@@ -68,12 +74,12 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
         geometry_count: geometries.len() as u32,
         primitive_count: fields.primitive_count,
         stored_count: fields.stored_count,
-        node_count: w.count,
-        depth: w.depth,
+        node_count,
+        depth,
         header_flags: fields.header_flags,
         preset: fields.preset,
         bounds,
-        used_size: plan.nodes_offset + 128 * w.count as u64,
+        used_size: plan.nodes_offset + 128 * node_count as u64,
         allocated_size,
         geometries_offset: plan.geometries_offset,
         nodes_offset: plan.nodes_offset,
@@ -81,62 +87,72 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
         prim_ids_offset: plan.prim_ids_offset,
         node_capacity: plan.node_capacity as u32,
         prim_capacity: plan.prim_capacity as u32,
-        sah_cost: w.sah,
+        sah_cost: sah,
         reserved: [0; 31],
     };
     dst[..HEADER_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&header));
     Ok(header)
 }
 
-struct Writer<'a> {
-    nodes: &'a mut [Node],
-    count: u32,
-    depth: u32,
-    sah: f32,
+struct Writer {
     root_area: f32,
 }
 
-impl Writer<'_> {
-    fn alloc(&mut self, depth: u32) -> Result<usize> {
-        let i = self.count as usize;
-        if i >= self.nodes.len() {
-            return Err(Error::OutOfHostMemory(format!("tree needs more than the planned {} nodes", self.nodes.len())));
-        }
-        if depth > MAX_DEPTH {
-            return Err(Error::OutOfHostMemory(format!("tree deeper than {MAX_DEPTH}")));
-        }
-        self.count += 1;
-        self.depth = self.depth.max(depth);
-        Ok(i)
-    }
+/// Subtrees with more nodes than this are written on another thread.
+const PARALLEL_NODES: u32 = 2048;
 
+impl Writer {
     fn rel_area(&self, b: &Aabb) -> f32 {
         if self.root_area > 0.0 { b.half_area() / self.root_area } else { 1.0 }
     }
 
-    /// Writes the inner node `child` and its subtree in depth-first order; returns its index.
-    fn write(&mut self, child: &Child, depth: u32) -> Result<u32> {
-        let Child::Inner(inner) = child else { return Ok(EMPTY_CHILD) };
-        let index = self.alloc(depth)?;
+    /// Writes `inner` at `out[0]` and its subtree after it, in depth-first order; `index` is
+    /// the global index of `out[0]`. Returns the subtree's SAH contribution (below this node's
+    /// own visit) and its depth.
+    fn write(&self, inner: &InnerNode, out: &mut [Node], index: u32, depth: u32) -> Result<(f32, u32)> {
+        if depth > MAX_DEPTH {
+            return Err(Error::OutOfHostMemory(format!("tree deeper than {MAX_DEPTH}")));
+        }
+        let (me, mut rest) = out.split_first_mut().ok_or_else(|| Error::OutOfHostMemory("node plan exceeded".into()))?;
         let mut node = Node::EMPTY;
+        let mut sah = 0.0;
+        let mut next = index + 1;
+        // Children's subtrees take consecutive ranges of `rest`, in slot order.
+        let mut jobs: [Option<(&InnerNode, &mut [Node], u32)>; 4] = [None, None, None, None];
         for (k, (b, c)) in inner.children().iter().enumerate() {
             node.set_bounds(k, b);
             match c {
                 Child::Leaf { first, count } => {
                     node.child[k] = LEAF_BIT | first;
                     node.count[k] = *count as u8;
-                    self.sah += SAH_PRIM_COST * *count as f32 * self.rel_area(b);
+                    sah += SAH_PRIM_COST * *count as f32 * self.rel_area(b);
                 }
-                Child::Inner(_) => {
-                    node.child[k] = self.write(c, depth + 1)?;
-                    self.sah += SAH_NODE_COST * self.rel_area(b);
+                Child::Inner(sub) => {
+                    node.child[k] = next;
+                    sah += SAH_NODE_COST * self.rel_area(b);
+                    let n = (sub.nodes as usize).min(rest.len());
+                    let (mine, tail) = std::mem::take(&mut rest).split_at_mut(n);
+                    jobs[k] = Some((sub, mine, next));
+                    rest = tail;
+                    next += sub.nodes;
                 }
             }
         }
-        if index == 0 {
-            self.sah += SAH_NODE_COST;
+        *me = node;
+        let run = |j: Option<(&InnerNode, &mut [Node], u32)>| -> Result<(f32, u32)> {
+            match j {
+                Some((sub, slice, idx)) => self.write(sub, slice, idx, depth + 1),
+                None => Ok((0.0, depth)),
+            }
+        };
+        let results: Vec<Result<(f32, u32)>> =
+            if inner.nodes > PARALLEL_NODES { jobs.into_par_iter().map(run).collect() } else { jobs.into_iter().map(run).collect() };
+        let mut max_depth = depth;
+        for r in results {
+            let (s, d) = r?;
+            sah += s;
+            max_depth = max_depth.max(d);
         }
-        self.nodes[index] = node;
-        Ok(index as u32)
+        Ok((sah, max_depth))
     }
 }
