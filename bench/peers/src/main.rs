@@ -261,6 +261,13 @@ fn main() {
         print!("{}", rep.markdown());
         std::io::stdout().flush().ok();
         if let Some(j) = json.as_mut() {
+            let summary = serde_json::json!({
+                "scene_summary": sc.name, "tris": sc.tri_count(), "source": sc.source, "seconds": rep.seconds,
+                "threads": threads, "rays_per_kind": args.rays * args.rays,
+                "check_reference": rep.reference.map(|i| rep.rows[i].name()), "notes": rep.notes,
+                "hostas": option_env!("PEERS_GIT_REV"),
+            });
+            writeln!(j, "{summary}").unwrap();
             for l in rep.json_lines() {
                 writeln!(j, "{l}").unwrap();
             }

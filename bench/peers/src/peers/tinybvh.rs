@@ -150,6 +150,18 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             row.note = format!("threaded builds use hardware_concurrency() = {hw} threads");
         }
         row.extra.insert("bvh2_ms".into(), serde_json::Value::Object(bvh2_ms));
+        if v.kind == 0 {
+            // Sanity check of the shim: tinybvh-rs's own `BVH::new` runs the same reference
+            // builder from the same header; its SAH must match the shim's (untimed).
+            if let Ok(b) = tinybvh_rs::bvh::BVH::new(soup.as_slice().into()) {
+                let theirs = b.sah_cost(0);
+                row.extra.insert("tinybvh_rs_sahcost".into(), json!(theirs));
+                let ours = row.extra.get("tinybvh_sahcost").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+                if ((ours - theirs as f64) / ours).abs() > 1e-3 {
+                    row.note = format!("shim SAHCost {ours:.3} differs from tinybvh-rs BVH::new {theirs:.3}");
+                }
+            }
+        }
         let h = kept.expect("1-thread build");
         row.sah_note = "BVH2 before widening".into();
         row.bytes = Some(unsafe { tbp_bvh8_bytes(h.0) });
