@@ -320,6 +320,12 @@ fn corrupt_and_truncated_inputs_fail_cleanly() {
     f.write("noise.bin", b"this is not an acceleration structure, just some text");
     fails(&f.run(&["info", "noise.bin"]), "not a hostas build file or serialized acceleration structure");
     fails(&f.run(&["trace", "noise.bin", "--rays", "r.bin", "--hits", "h.bin"]), "not a mesh");
+    fails(&f.run(&["info", "ball.obj"]), "it looks like a mesh");
+    let mut noise = vec![0xffu8; 300];
+    noise[32..40].copy_from_slice(&1000u64.to_le_bytes());
+    noise[48..56].copy_from_slice(&0u64.to_le_bytes());
+    f.write("noise.bin", &noise);
+    fails(&f.run(&["info", "noise.bin"]), "serializedSize 1000 for a file of 300 bytes: truncated?");
 
     // Broken meshes: the mesh loader's message with the place.
     f.write("broken.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n");

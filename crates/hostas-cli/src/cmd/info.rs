@@ -179,9 +179,22 @@ pub fn inspect(path: &std::path::Path) -> Result<FileInfo> {
         structures.push(describe(&device, "top level".into(), String::new(), &c.tlas.data).with_context(|| file.clone())?);
         return Ok(FileInfo { file, format: "hostas-build", bytes: data.len() as u64, bounds: c.bounds.map(|(l, h)| [l, h]), structures });
     }
-    let s = describe(&device, "structure".into(), String::new(), &data).map_err(|e| {
-        anyhow!("{file}: not a hostas build file or serialized acceleration structure ({})", e.to_string().trim_start_matches("structure: "))
-    })?;
+    let not_one = |why: String| {
+        let mesh_hint = if crate::mesh::is_mesh_path(path) { "; it looks like a mesh: `hostas build` makes a structure of it" } else { "" };
+        anyhow!("{file}: not a hostas build file or serialized acceleration structure ({why}){mesh_hint}")
+    };
+    // Plausibility: any implementation's data starts with its total size and handle list.
+    let h = SerializedHeader::parse(&data).map_err(|e| not_one(e.to_string()))?;
+    let listed = 56 + 8 * h.handles.len() as u64;
+    if h.serialized_size > data.len() as u64 || h.serialized_size < listed {
+        return Err(not_one(format!(
+            "its header gives serializedSize {} for a file of {} bytes{}",
+            h.serialized_size,
+            data.len(),
+            if h.serialized_size > data.len() as u64 { ": truncated?" } else { "" }
+        )));
+    }
+    let s = describe(&device, "structure".into(), String::new(), &data).map_err(|e| not_one(e.to_string()))?;
     Ok(FileInfo { file, format: "serialized", bytes: data.len() as u64, bounds: None, structures: vec![s] })
 }
 

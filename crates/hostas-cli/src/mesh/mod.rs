@@ -157,6 +157,11 @@ fn classify(path: &Path) -> Option<(String, Format, bool)> {
     Some((file_name[..stem_len].to_owned(), format, compressed))
 }
 
+/// Whether `path` has one of the extensions [`load`] accepts.
+pub fn is_mesh_path(path: &Path) -> bool {
+    classify(path).is_some()
+}
+
 /// Loads the mesh at `path`, choosing the format by its extension (case-insensitive).
 pub fn load(path: &Path) -> Result<Mesh, MeshError> {
     let (name, format, compressed) =
