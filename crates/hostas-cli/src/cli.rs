@@ -94,7 +94,9 @@ impl PresetArgs {
 pub fn parse_vec3(s: &str) -> std::result::Result<[f32; 3], String> {
     let parts: Vec<&str> = s.split(',').map(str::trim).collect();
     if parts.len() != 3 {
-        return Err(format!("expected three comma-separated numbers like 1,2.5,-3, got {s:?}"));
+        return Err(format!(
+            "expected three comma-separated numbers like 1,2.5,-3, got {s:?}"
+        ));
     }
     let mut out = [0.0; 3];
     for (o, p) in out.iter_mut().zip(&parts) {
@@ -123,7 +125,10 @@ pub fn write_file(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
 pub fn run(cli: Cli) -> Result<()> {
     crate::progress::set_quiet(cli.global.quiet);
     if let Some(n) = cli.global.threads {
-        rayon::ThreadPoolBuilder::new().num_threads(n as usize).build_global().context("setting up the thread pool")?;
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n as usize)
+            .build_global()
+            .context("setting up the thread pool")?;
     }
     match cli.command {
         Command::Demo(a) => cmd::demo::run(a),
@@ -141,7 +146,11 @@ pub fn main() -> ExitCode {
         Ok(c) => c,
         Err(e) => {
             let _ = e.print();
-            return if e.use_stderr() { ExitCode::from(2) } else { ExitCode::SUCCESS };
+            return if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            };
         }
     };
     match run(cli) {

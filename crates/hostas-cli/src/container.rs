@@ -65,7 +65,10 @@ fn u64_at(b: &[u8], o: usize) -> u64 {
 }
 
 /// Rewrites the handle list of serialized data with `map(handle)`.
-pub fn rewrite_handles(data: &mut [u8], mut map: impl FnMut(usize, u64) -> Result<u64>) -> Result<()> {
+pub fn rewrite_handles(
+    data: &mut [u8],
+    mut map: impl FnMut(usize, u64) -> Result<u64>,
+) -> Result<()> {
     let header = SerializedHeader::parse(data).map_err(|e| anyhow!("{e}"))?;
     for (i, &h) in header.handles.iter().enumerate() {
         let v = map(i, h)?;
@@ -84,9 +87,16 @@ impl Container {
     ) -> Result<Container> {
         let mut out = Vec::with_capacity(blases.len());
         for (name, b) in blases {
-            out.push(Blob { name: name.clone(), data: device.serialize(*b).with_context(|| format!("serializing the bottom level of {name}"))? });
+            out.push(Blob {
+                name: name.clone(),
+                data: device
+                    .serialize(*b)
+                    .with_context(|| format!("serializing the bottom level of {name}"))?,
+            });
         }
-        let mut data = device.serialize(tlas).context("serializing the top level")?;
+        let mut data = device
+            .serialize(tlas)
+            .context("serializing the top level")?;
         rewrite_handles(&mut data, |i, h| {
             if h == 0 {
                 return Ok(0);
@@ -94,12 +104,23 @@ impl Container {
             let k = blases.iter().position(|(_, b)| b.raw() == h).ok_or_else(|| anyhow!("instance {i} references {h:#x}, which is not one of the structures being written"))?;
             Ok(k as u64 + 1)
         })?;
-        Ok(Container { blases: out, tlas: Blob { name: String::new(), data }, bounds })
+        Ok(Container {
+            blases: out,
+            tlas: Blob {
+                name: String::new(),
+                data,
+            },
+            bounds,
+        })
     }
 
     pub fn to_bytes(&self) -> Vec<u8> {
         let n = self.blases.len();
-        let all: Vec<&Blob> = self.blases.iter().chain(std::iter::once(&self.tlas)).collect();
+        let all: Vec<&Blob> = self
+            .blases
+            .iter()
+            .chain(std::iter::once(&self.tlas))
+            .collect();
         let names_at = HEADER + ENTRY * all.len();
         let names_len: usize = all.iter().map(|b| b.name.len()).sum();
         let mut blob_at = align16(names_at + names_len);
@@ -133,57 +154,110 @@ impl Container {
 
     /// Parses a container, checking every offset and length against the file.
     pub fn parse(bytes: &[u8]) -> Result<Container> {
-        ensure!(is_container(bytes), "not a hostas build file (no HOSTASF1 magic)");
-        ensure!(bytes.len() >= HEADER, "truncated: {} bytes is too short for the 48-byte header", bytes.len());
+        ensure!(
+            is_container(bytes),
+            "not a hostas build file (no HOSTASF1 magic)"
+        );
+        ensure!(
+            bytes.len() >= HEADER,
+            "truncated: {} bytes is too short for the 48-byte header",
+            bytes.len()
+        );
         let version = u32_at(bytes, 8);
-        ensure!(version == VERSION, "format version {version} is not supported (this hostas reads version {VERSION})");
+        ensure!(
+            version == VERSION,
+            "format version {version} is not supported (this hostas reads version {VERSION})"
+        );
         let n = u32_at(bytes, 12) as usize;
-        let entries_end = n.checked_add(1).and_then(|k| k.checked_mul(ENTRY)).and_then(|s| s.checked_add(HEADER));
+        let entries_end = n
+            .checked_add(1)
+            .and_then(|k| k.checked_mul(ENTRY))
+            .and_then(|s| s.checked_add(HEADER));
         let entries_end = entries_end.filter(|&e| e <= bytes.len()).ok_or_else(|| {
             anyhow!("truncated: the header announces {n} bottom-level structures, but the file ({} bytes) is too short for their entries", bytes.len())
         })?;
         let _ = entries_end;
-        let f = |k: usize| f32::from_le_bytes(bytes[16 + 4 * k..20 + 4 * k].try_into().unwrap_or_default());
+        let f = |k: usize| {
+            f32::from_le_bytes(bytes[16 + 4 * k..20 + 4 * k].try_into().unwrap_or_default())
+        };
         let lo = [f(0), f(1), f(2)];
         let hi = [f(3), f(4), f(5)];
         let bounds = (lo.iter().chain(hi.iter()).all(|v| v.is_finite())).then_some((lo, hi));
         let mut blobs = Vec::with_capacity(n + 1);
         for i in 0..=n {
-            let what = if i == n { "the top level".to_string() } else { format!("bottom level {i}") };
+            let what = if i == n {
+                "the top level".to_string()
+            } else {
+                format!("bottom level {i}")
+            };
             let e = HEADER + ENTRY * i;
             let (off, len) = (u64_at(bytes, e), u64_at(bytes, e + 8));
             let (name_off, name_len) = (u32_at(bytes, e + 16) as u64, u32_at(bytes, e + 20) as u64);
-            let end = off.checked_add(len).filter(|&end| end <= bytes.len() as u64);
+            let end = off
+                .checked_add(len)
+                .filter(|&end| end <= bytes.len() as u64);
             let Some(end) = end else {
-                bail!("truncated: {what} is announced at bytes {off}..{}, but the file has {} bytes", off.saturating_add(len), bytes.len());
+                bail!(
+                    "truncated: {what} is announced at bytes {off}..{}, but the file has {} bytes",
+                    off.saturating_add(len),
+                    bytes.len()
+                );
             };
-            let name_end = name_off.checked_add(name_len).filter(|&end| end <= bytes.len() as u64);
+            let name_end = name_off
+                .checked_add(name_len)
+                .filter(|&end| end <= bytes.len() as u64);
             let Some(name_end) = name_end else {
-                bail!("truncated: the name of {what} is announced at bytes {name_off}..{}, but the file has {} bytes", name_off + name_len, bytes.len());
+                bail!(
+                    "truncated: the name of {what} is announced at bytes {name_off}..{}, but the file has {} bytes",
+                    name_off + name_len,
+                    bytes.len()
+                );
             };
-            let name = String::from_utf8_lossy(&bytes[name_off as usize..name_end as usize]).into_owned();
-            blobs.push(Blob { name, data: bytes[off as usize..end as usize].to_vec() });
+            let name =
+                String::from_utf8_lossy(&bytes[name_off as usize..name_end as usize]).into_owned();
+            blobs.push(Blob {
+                name,
+                data: bytes[off as usize..end as usize].to_vec(),
+            });
         }
-        let tlas = blobs.pop().unwrap_or(Blob { name: String::new(), data: Vec::new() });
-        Ok(Container { blases: blobs, tlas, bounds })
+        let tlas = blobs.pop().unwrap_or(Blob {
+            name: String::new(),
+            data: Vec::new(),
+        });
+        Ok(Container {
+            blases: blobs,
+            tlas,
+            bounds,
+        })
     }
 
     /// Deserializes every structure onto `device`: the bottom levels, then the top level with
     /// its handle list rewritten to them. Returns (bottom levels, top level).
-    pub fn load(&self, device: &Device) -> Result<(Vec<AccelerationStructure>, AccelerationStructure)> {
+    pub fn load(
+        &self,
+        device: &Device,
+    ) -> Result<(Vec<AccelerationStructure>, AccelerationStructure)> {
         let mut blases = Vec::with_capacity(self.blases.len());
         for (i, b) in self.blases.iter().enumerate() {
-            let a = device.deserialize(&b.data).map_err(|e| anyhow!("bottom level {i} ({}): {e}", b.name))?;
+            let a = device
+                .deserialize(&b.data)
+                .map_err(|e| anyhow!("bottom level {i} ({}): {e}", b.name))?;
             blases.push(a);
         }
         let mut data = self.tlas.data.clone();
         rewrite_handles(&mut data, |i, h| match h {
             0 => Ok(0),
             k if k <= blases.len() as u64 => Ok(blases[k as usize - 1].raw()),
-            k => bail!("top level: instance {i} refers to bottom level {} but the file holds {}", k - 1, blases.len()),
+            k => bail!(
+                "top level: instance {i} refers to bottom level {} but the file holds {}",
+                k - 1,
+                blases.len()
+            ),
         })
         .map_err(|e| anyhow!("top level: {e}"))?;
-        let tlas = device.deserialize(&data).map_err(|e| anyhow!("top level: {e}"))?;
+        let tlas = device
+            .deserialize(&data)
+            .map_err(|e| anyhow!("top level: {e}"))?;
         Ok((blases, tlas))
     }
 }
@@ -194,8 +268,20 @@ mod tests {
 
     fn sample() -> Container {
         Container {
-            blases: vec![Blob { name: "a".into(), data: vec![1; 70] }, Blob { name: "bé".into(), data: vec![2; 33] }],
-            tlas: Blob { name: String::new(), data: vec![3; 90] },
+            blases: vec![
+                Blob {
+                    name: "a".into(),
+                    data: vec![1; 70],
+                },
+                Blob {
+                    name: "bé".into(),
+                    data: vec![2; 33],
+                },
+            ],
+            tlas: Blob {
+                name: String::new(),
+                data: vec![3; 90],
+            },
             bounds: Some(([0.0, 1.0, 2.0], [3.0, 4.0, 5.0])),
         }
     }
@@ -235,12 +321,21 @@ mod tests {
         let b1 = hostas::quick::build_triangle_blas(&d, &tri, &[[0, 2, 1]], flags).unwrap();
         let mut inactive = hostas::quick::instance(b0, hostas::Affine::IDENTITY);
         inactive.acceleration_structure_reference = 0;
-        let shifted = hostas::Affine::from_rows([1.0, 0.0, 0.0, 5.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
-        let instances = [hostas::quick::instance(b1, hostas::Affine::IDENTITY), inactive, hostas::quick::instance(b0, shifted)];
+        let shifted =
+            hostas::Affine::from_rows([1.0, 0.0, 0.0, 5.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        let instances = [
+            hostas::quick::instance(b1, hostas::Affine::IDENTITY),
+            inactive,
+            hostas::quick::instance(b0, shifted),
+        ];
         let tlas = hostas::quick::build_tlas(&d, &instances, flags).unwrap();
-        let c = Container::from_device(&d, &[("zero".into(), b0), ("one".into(), b1)], tlas, None).unwrap();
+        let c = Container::from_device(&d, &[("zero".into(), b0), ("one".into(), b1)], tlas, None)
+            .unwrap();
         let c = Container::parse(&c.to_bytes()).unwrap();
-        assert_eq!(SerializedHeader::parse(&c.tlas.data).unwrap().handles, vec![2, 0, 1]);
+        assert_eq!(
+            SerializedHeader::parse(&c.tlas.data).unwrap().handles,
+            vec![2, 0, 1]
+        );
         let d2 = Device::new();
         let (_, t2) = c.load(&d2).unwrap();
         let scene = d2.scene(t2).unwrap();

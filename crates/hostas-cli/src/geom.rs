@@ -20,7 +20,11 @@ pub fn dot(a: V3, b: V3) -> f32 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 pub fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 pub fn length(a: V3) -> f32 {
     dot(a, a).sqrt()
@@ -28,7 +32,11 @@ pub fn length(a: V3) -> f32 {
 /// `a` scaled to unit length; the zero vector stays zero.
 pub fn normalize(a: V3) -> V3 {
     let l = length(a);
-    if l > 0.0 && l.is_finite() { scale(a, 1.0 / l) } else { [0.0; 3] }
+    if l > 0.0 && l.is_finite() {
+        scale(a, 1.0 / l)
+    } else {
+        [0.0; 3]
+    }
 }
 pub fn lerp(a: V3, b: V3, t: f32) -> V3 {
     add(scale(a, 1.0 - t), scale(b, t))
@@ -50,10 +58,14 @@ pub fn compose(a: &Affine, b: &Affine) -> Affine {
 }
 
 pub fn translation(t: V3) -> Affine {
-    Affine::from_rows([1.0, 0.0, 0.0, t[0], 0.0, 1.0, 0.0, t[1], 0.0, 0.0, 1.0, t[2]])
+    Affine::from_rows([
+        1.0, 0.0, 0.0, t[0], 0.0, 1.0, 0.0, t[1], 0.0, 0.0, 1.0, t[2],
+    ])
 }
 pub fn scaling(s: V3) -> Affine {
-    Affine::from_rows([s[0], 0.0, 0.0, 0.0, 0.0, s[1], 0.0, 0.0, 0.0, 0.0, s[2], 0.0])
+    Affine::from_rows([
+        s[0], 0.0, 0.0, 0.0, 0.0, s[1], 0.0, 0.0, 0.0, 0.0, s[2], 0.0,
+    ])
 }
 /// Rotation by `angle` radians about the unit `axis` (right-handed).
 pub fn rotation(axis: V3, angle: f32) -> Affine {

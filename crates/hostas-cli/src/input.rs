@@ -41,9 +41,13 @@ pub struct Loaded {
 
 /// Reads the first bytes of a file.
 fn head(path: &Path, n: usize) -> Result<Vec<u8>> {
-    let mut f = std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let mut f =
+        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
     let mut buf = Vec::with_capacity(n);
-    f.by_ref().take(n as u64).read_to_end(&mut buf).with_context(|| format!("{}: cannot read", path.display()))?;
+    f.by_ref()
+        .take(n as u64)
+        .read_to_end(&mut buf)
+        .with_context(|| format!("{}: cannot read", path.display()))?;
     Ok(buf)
 }
 
@@ -76,11 +80,24 @@ fn triangles_of(device: &Device, blases: &[AccelerationStructure]) -> u64 {
 /// Builds the scene of one mesh: geometry 0 (opaque, primitives in file order) in one BLAS,
 /// instance 0 with the identity transform. `ALLOW_DATA_ACCESS` is added so that shading can
 /// fetch triangle vertices.
-pub fn scene_of_mesh(device: &Device, m: &Mesh, flags: Flags) -> Result<(AccelerationStructure, AccelerationStructure)> {
-    let blas = hostas::quick::build_triangle_blas(device, &m.positions, &m.indices, flags | Flags::ALLOW_DATA_ACCESS)
-        .map_err(|e| anyhow!("{}: building the bottom level: {e}", m.name))?;
-    let tlas = hostas::quick::build_tlas(device, &[hostas::quick::instance(blas, hostas::Affine::IDENTITY)], flags & !Flags::ALLOW_DATA_ACCESS)
-        .map_err(|e| anyhow!("{}: building the top level: {e}", m.name))?;
+pub fn scene_of_mesh(
+    device: &Device,
+    m: &Mesh,
+    flags: Flags,
+) -> Result<(AccelerationStructure, AccelerationStructure)> {
+    let blas = hostas::quick::build_triangle_blas(
+        device,
+        &m.positions,
+        &m.indices,
+        flags | Flags::ALLOW_DATA_ACCESS,
+    )
+    .map_err(|e| anyhow!("{}: building the bottom level: {e}", m.name))?;
+    let tlas = hostas::quick::build_tlas(
+        device,
+        &[hostas::quick::instance(blas, hostas::Affine::IDENTITY)],
+        flags & !Flags::ALLOW_DATA_ACCESS,
+    )
+    .map_err(|e| anyhow!("{}: building the top level: {e}", m.name))?;
     Ok((blas, tlas))
 }
 
@@ -108,17 +125,39 @@ pub fn load(path: &Path, mesh_flags: Flags) -> Result<Loaded> {
     }
     match load_mesh(path) {
         Ok(m) => {
-            let pb = progress::spinner(format!("building {} ({} triangles)", m.name, m.indices.len()));
+            let pb = progress::spinner(format!(
+                "building {} ({} triangles)",
+                m.name,
+                m.indices.len()
+            ));
             let t = Instant::now();
             let r = scene_of_mesh(&device, &m, mesh_flags);
             let setup_time = t.elapsed();
             pb.finish_and_clear();
             let (blas, tlas) = r?;
             let (lo, hi) = m.bounds();
-            let bounds = lo.iter().chain(hi.iter()).all(|v| v.is_finite()).then_some((lo, hi));
-            Ok(Loaded { device, tlas, blases: vec![blas], names: vec![m.name.clone()], bounds, source: Source::Mesh, triangles: m.indices.len() as u64, setup_time })
+            let bounds = lo
+                .iter()
+                .chain(hi.iter())
+                .all(|v| v.is_finite())
+                .then_some((lo, hi));
+            Ok(Loaded {
+                device,
+                tlas,
+                blases: vec![blas],
+                names: vec![m.name.clone()],
+                bounds,
+                source: Source::Mesh,
+                triangles: m.indices.len() as u64,
+                setup_time,
+            })
         }
-        Err(e) if matches!(e.downcast_ref::<MeshError>(), Some(MeshError::UnsupportedExtension { .. })) => {
+        Err(e)
+            if matches!(
+                e.downcast_ref::<MeshError>(),
+                Some(MeshError::UnsupportedExtension { .. })
+            ) =>
+        {
             let bytes = std::fs::read(path).with_context(|| format!("{shown}: cannot read"))?;
             let header = SerializedHeader::parse(&bytes).map_err(|_| {
                 anyhow!("{shown}: not a mesh ({}), a hostas build file or a serialized acceleration structure", mesh::SUPPORTED_EXTENSIONS)
@@ -126,24 +165,35 @@ pub fn load(path: &Path, mesh_flags: Flags) -> Result<Loaded> {
             let mut version = [0u8; 32];
             version[..16].copy_from_slice(&header.driver_uuid);
             version[16..].copy_from_slice(&header.compatibility_uuid);
-            if device.compatibility(&version) != vk::AccelerationStructureCompatibilityKHR::COMPATIBLE {
+            if device.compatibility(&version)
+                != vk::AccelerationStructureCompatibilityKHR::COMPATIBLE
+            {
                 bail!(
                     "{shown}: this structure was serialized by another implementation or hostas version (driverUUID {}); hostas can trace only its own. `hostas info` decodes its header",
                     crate::report::uuid(&header.driver_uuid)
                 );
             }
             if header.handle_count != 0 {
-                bail!("{shown}: a bare serialized top-level structure carries no bottom levels; trace a `hostas build` file instead");
+                bail!(
+                    "{shown}: a bare serialized top-level structure carries no bottom levels; trace a `hostas build` file instead"
+                );
             }
             let t = Instant::now();
-            let blas = device.deserialize(&bytes).map_err(|e| anyhow!("{shown}: {e}"))?;
-            let tlas = hostas::quick::build_single_instance_tlas(&device, blas).map_err(|e| anyhow!("{shown}: {e}"))?;
+            let blas = device
+                .deserialize(&bytes)
+                .map_err(|e| anyhow!("{shown}: {e}"))?;
+            let tlas = hostas::quick::build_single_instance_tlas(&device, blas)
+                .map_err(|e| anyhow!("{shown}: {e}"))?;
             let triangles = triangles_of(&device, &[blas]);
             Ok(Loaded {
                 device,
                 tlas,
                 blases: vec![blas],
-                names: vec![path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()],
+                names: vec![
+                    path.file_stem()
+                        .map(|s| s.to_string_lossy().into_owned())
+                        .unwrap_or_default(),
+                ],
                 bounds: serialized_bounds(&bytes),
                 source: Source::Serialized,
                 triangles,

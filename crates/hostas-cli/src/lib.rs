@@ -9,7 +9,6 @@
 pub mod cli;
 pub mod cmd;
 pub mod container;
-pub mod shapes;
 pub mod geom;
 pub mod image;
 pub mod input;
@@ -20,3 +19,4 @@ pub mod records;
 pub mod render;
 pub mod report;
 pub mod shade;
+pub mod shapes;

@@ -6,14 +6,27 @@ use hostas::{AccelerationStructure, AccelerationStructureCreateInfo, Device, vk}
 /// Compacts `src` (built with `ALLOW_COMPACTION`) into a new structure of exactly the
 /// compacted size (`vkCmdWriteAccelerationStructuresPropertiesKHR` + `COMPACT` copy), and
 /// destroys `src`. Returns the new structure and the sizes before and after.
-pub fn compact(device: &Device, src: AccelerationStructure, ty: vk::AccelerationStructureTypeKHR) -> Result<(AccelerationStructure, u64, u64)> {
+pub fn compact(
+    device: &Device,
+    src: AccelerationStructure,
+    ty: vk::AccelerationStructureTypeKHR,
+) -> Result<(AccelerationStructure, u64, u64)> {
     let before = device.placement(src).map_err(|e| anyhow!("{e}"))?.2;
     let size = device
-        .acceleration_structure_property(src, vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR)
+        .acceleration_structure_property(
+            src,
+            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+        )
         .map_err(|e| anyhow!("querying the compacted size: {e}"))?;
-    let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, size)).map_err(|e| anyhow!("{e}"))?;
-    device.copy_acceleration_structure(src, dst, vk::CopyAccelerationStructureModeKHR::COMPACT).map_err(|e| anyhow!("compacting: {e}"))?;
-    device.destroy_acceleration_structure(src).map_err(|e| anyhow!("{e}"))?;
+    let dst = device
+        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, size))
+        .map_err(|e| anyhow!("{e}"))?;
+    device
+        .copy_acceleration_structure(src, dst, vk::CopyAccelerationStructureModeKHR::COMPACT)
+        .map_err(|e| anyhow!("compacting: {e}"))?;
+    device
+        .destroy_acceleration_structure(src)
+        .map_err(|e| anyhow!("{e}"))?;
     Ok((dst, before, size))
 }
 
@@ -43,6 +56,15 @@ pub fn build_triangles(
         },
         geometry_flags,
     );
-    let range = hostas::BuildRangeInfo { primitive_count: indices.len() as u32, ..Default::default() };
-    hostas::quick::build(device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, flags, &[g], &[range])
+    let range = hostas::BuildRangeInfo {
+        primitive_count: indices.len() as u32,
+        ..Default::default()
+    };
+    hostas::quick::build(
+        device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        flags,
+        &[g],
+        &[range],
+    )
 }

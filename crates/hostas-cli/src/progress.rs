@@ -15,16 +15,22 @@ pub fn quiet() -> bool {
 }
 
 fn target() -> ProgressDrawTarget {
-    if quiet() { ProgressDrawTarget::hidden() } else { ProgressDrawTarget::stderr() }
+    if quiet() {
+        ProgressDrawTarget::hidden()
+    } else {
+        ProgressDrawTarget::stderr()
+    }
 }
 
 /// A bar over `len` steps.
 pub fn bar(len: u64, message: impl Into<String>) -> ProgressBar {
     let pb = ProgressBar::with_draw_target(Some(len), target());
     pb.set_style(
-        ProgressStyle::with_template("{spinner:.green} {msg:32!} [{bar:30.cyan/blue}] {pos}/{len} ({elapsed}, eta {eta})")
-            .unwrap_or_else(|_| ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner:.green} {msg:32!} [{bar:30.cyan/blue}] {pos}/{len} ({elapsed}, eta {eta})",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     pb.set_message(message.into());
     pb.enable_steady_tick(Duration::from_millis(120));
@@ -34,7 +40,10 @@ pub fn bar(len: u64, message: impl Into<String>) -> ProgressBar {
 /// A spinner for work of unknown length.
 pub fn spinner(message: impl Into<String>) -> ProgressBar {
     let pb = ProgressBar::with_draw_target(None, target());
-    pb.set_style(ProgressStyle::with_template("{spinner:.green} {msg} ({elapsed})").unwrap_or_else(|_| ProgressStyle::default_spinner()));
+    pb.set_style(
+        ProgressStyle::with_template("{spinner:.green} {msg} ({elapsed})")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
     pb.set_message(message.into());
     pb.enable_steady_tick(Duration::from_millis(120));
     pb

@@ -109,7 +109,11 @@ pub fn decode_hit(b: &[u8]) -> HitRecord {
 }
 
 pub fn decode_hits(bytes: &[u8]) -> Result<Vec<HitRecord>> {
-    ensure!(bytes.len() % HIT_SIZE == 0, "truncated: {} bytes is not a whole number of {HIT_SIZE}-byte hit records", bytes.len());
+    ensure!(
+        bytes.len() % HIT_SIZE == 0,
+        "truncated: {} bytes is not a whole number of {HIT_SIZE}-byte hit records",
+        bytes.len()
+    );
     Ok(bytes.chunks_exact(HIT_SIZE).map(decode_hit).collect())
 }
 
@@ -125,7 +129,14 @@ mod tests {
 
     #[test]
     fn ray_round_trip() {
-        let r = Ray { origin: [1.0, -2.0, 3.5], t_min: 0.25, direction: [0.0, -0.0, 1.0], t_max: f32::INFINITY, flags: RayFlags(0x123), cull_mask: 0x7f };
+        let r = Ray {
+            origin: [1.0, -2.0, 3.5],
+            t_min: 0.25,
+            direction: [0.0, -0.0, 1.0],
+            t_max: f32::INFINITY,
+            flags: RayFlags(0x123),
+            cull_mask: 0x7f,
+        };
         let b = encode_ray(&r);
         assert_eq!(decode_ray(&b), r);
         assert_eq!(decode_rays(&b).unwrap(), vec![r]);
@@ -134,9 +145,29 @@ mod tests {
 
     #[test]
     fn hit_round_trip() {
-        let h = Hit { kind: HitKind::Generated, t: 2.5, instance_id: 7, instance_custom_index: 9, geometry_index: 1, primitive_index: 42, barycentrics: [0.25, 0.5], front_face: true };
+        let h = Hit {
+            kind: HitKind::Generated,
+            t: 2.5,
+            instance_id: 7,
+            instance_custom_index: 9,
+            geometry_index: 1,
+            primitive_index: 42,
+            barycentrics: [0.25, 0.5],
+            front_face: true,
+        };
         let d = decode_hit(&encode_hit(&h));
-        assert_eq!(d, HitRecord { t: 2.5, instance_id: 7, geometry_index: 1, primitive_id: 42, barycentrics: [0.25, 0.5], kind: 2, front_face: true });
+        assert_eq!(
+            d,
+            HitRecord {
+                t: 2.5,
+                instance_id: 7,
+                geometry_index: 1,
+                primitive_id: 42,
+                barycentrics: [0.25, 0.5],
+                kind: 2,
+                front_face: true
+            }
+        );
         assert_eq!(encode_hit(&Hit::MISS), [0; HIT_SIZE]);
     }
 }

@@ -28,14 +28,26 @@ impl Camera {
         let radius = (0.5 * length(sub(hi, lo))).max(1e-3);
         let up = normalize(up);
         // Front: +z when y is up; otherwise the axis after `up`'s largest component.
-        let major = (0..3).max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs())).unwrap_or(1);
+        let major = (0..3)
+            .max_by(|&a, &b| up[a].abs().total_cmp(&up[b].abs()))
+            .unwrap_or(1);
         let mut front = [0.0; 3];
         front[(major + 1) % 3] = 1.0;
         let right = normalize(cross(up, front));
-        let dir = normalize(add(add(scale(front, 1.0), scale(right, 0.45)), scale(up, 0.4)));
-        let half = (fov_y.to_radians() * 0.5).tan().min((fov_y.to_radians() * 0.5).tan() * aspect);
+        let dir = normalize(add(
+            add(scale(front, 1.0), scale(right, 0.45)),
+            scale(up, 0.4),
+        ));
+        let half = (fov_y.to_radians() * 0.5)
+            .tan()
+            .min((fov_y.to_radians() * 0.5).tan() * aspect);
         let distance = radius / half.atan().sin() * 1.02;
-        Camera { eye: add(center, scale(dir, distance)), target: center, up, fov_y }
+        Camera {
+            eye: add(center, scale(dir, distance)),
+            target: center,
+            up,
+            fov_y,
+        }
     }
 }
 
@@ -95,14 +107,23 @@ pub fn sky(dir: V3, look: &Look) -> V3 {
     let horizon = [0.74, 0.82, 0.94];
     let zenith = [0.2, 0.4, 0.8];
     let ground = [0.42, 0.4, 0.38];
-    let base = if h >= 0.0 { lerp(horizon, zenith, h.powf(0.6)) } else { lerp(horizon, ground, (-h).powf(0.5)) };
-    let sun = dot(d, look.sun).max(0.0).powf(600.0) * 6.0 + dot(d, look.sun).max(0.0).powf(12.0) * 0.25;
+    let base = if h >= 0.0 {
+        lerp(horizon, zenith, h.powf(0.6))
+    } else {
+        lerp(horizon, ground, (-h).powf(0.5))
+    };
+    let sun =
+        dot(d, look.sun).max(0.0).powf(600.0) * 6.0 + dot(d, look.sun).max(0.0).powf(12.0) * 0.25;
     add(base, [sun, sun * 0.9, sun * 0.7])
 }
 
 /// Default surface colour: the normal (as RGB) mixed with the instance's tint.
 pub fn default_albedo(s: &Surface, n: V3, look: &Look) -> V3 {
-    let tint = if look.tint_instances { instance_tint(s.hit.instance_id) } else { [0.78, 0.58, 0.42] };
+    let tint = if look.tint_instances {
+        instance_tint(s.hit.instance_id)
+    } else {
+        [0.78, 0.58, 0.42]
+    };
     let normal_rgb = [0.5 + 0.5 * n[0], 0.5 + 0.5 * n[1], 0.5 + 0.5 * n[2]];
     let mut c = lerp(tint, normal_rgb, 0.45);
     if look.mark_back_faces && !s.hit.front_face {
@@ -112,7 +133,13 @@ pub fn default_albedo(s: &Surface, n: V3, look: &Look) -> V3 {
 }
 
 /// Linear colour seen along `ray`, with the rays it took.
-pub fn shade_ray(scene: &Scene, ray: &Ray, programs: &impl Programs, look: &Look, stats: &mut RenderStats) -> hostas::Result<V3> {
+pub fn shade_ray(
+    scene: &Scene,
+    ray: &Ray,
+    programs: &impl Programs,
+    look: &Look,
+    stats: &mut RenderStats,
+) -> hostas::Result<V3> {
     stats.primary_rays += 1;
     let Some(s) = shade::trace(scene, ray, programs)? else {
         return Ok(sky(ray.direction, look));
@@ -123,7 +150,9 @@ pub fn shade_ray(scene: &Scene, ray: &Ray, programs: &impl Programs, look: &Look
     if dot(n, d) > 0.0 {
         n = scale(n, -1.0);
     }
-    let albedo = programs.albedo(&s).unwrap_or_else(|| default_albedo(&s, n, look));
+    let albedo = programs
+        .albedo(&s)
+        .unwrap_or_else(|| default_albedo(&s, n, look));
     let lambert = dot(n, look.sun).max(0.0);
     let mut visible = 1.0;
     if lambert > 0.0 && look.shadows {
@@ -151,7 +180,11 @@ fn to_srgb8(v: f32) -> u8 {
     let v = v.max(0.0);
     // A soft shoulder keeps highlights from clipping hard.
     let v = v / (1.0 + 0.15 * v);
-    let s = if v <= 0.003_130_8 { 12.92 * v } else { 1.055 * v.powf(1.0 / 2.4) - 0.055 };
+    let s = if v <= 0.003_130_8 {
+        12.92 * v
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
     (s.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
@@ -165,10 +198,16 @@ pub fn render(
     look: &Look,
     row_done: &(dyn Fn() + Sync),
 ) -> Result<(Image, RenderStats)> {
-    ensure!(width > 0 && height > 0, "the image must be at least 1x1 pixels");
+    ensure!(
+        width > 0 && height > 0,
+        "the image must be at least 1x1 pixels"
+    );
     let forward = normalize(sub(camera.target, camera.eye));
     let right = normalize(cross(forward, camera.up));
-    ensure!(forward != [0.0; 3] && right != [0.0; 3], "the camera's eye, target and up vector do not define a view (eye = target, or up parallel to the view direction)");
+    ensure!(
+        forward != [0.0; 3] && right != [0.0; 3],
+        "the camera's eye, target and up vector do not define a view (eye = target, or up parallel to the view direction)"
+    );
     let up = cross(right, forward);
     let half_h = (camera.fov_y.clamp(1.0, 179.0).to_radians() * 0.5).tan();
     let half_w = half_h * width as f32 / height as f32;
@@ -189,17 +228,26 @@ pub fn render(
                     let (jx, jy) = if spp == 1 {
                         (0.5, 0.5)
                     } else {
-                        (((k % grid) as f32 + rng.f32()) / grid as f32, ((k / grid) as f32 + rng.f32()) / grid as f32)
+                        (
+                            ((k % grid) as f32 + rng.f32()) / grid as f32,
+                            ((k / grid) as f32 + rng.f32()) / grid as f32,
+                        )
                     };
                     let u = (2.0 * (x as f32 + jx) / width as f32 - 1.0) * half_w;
                     let v = (1.0 - 2.0 * (y as f32 + jy) / height as f32) * half_h;
                     let dir = add(forward, add(scale(right, u), scale(up, v)));
                     let ray = Ray::new(camera.eye, dir);
-                    let c = shade_ray(scene, &ray, programs, look, &mut stats).map_err(|e| anyhow!("tracing pixel ({x}, {y}): {e}"))?;
+                    let c = shade_ray(scene, &ray, programs, look, &mut stats)
+                        .map_err(|e| anyhow!("tracing pixel ({x}, {y}): {e}"))?;
                     sum = add(sum, c);
                 }
                 let c = scale(sum, 1.0 / spp as f32);
-                row[4 * x..4 * x + 4].copy_from_slice(&[to_srgb8(c[0]), to_srgb8(c[1]), to_srgb8(c[2]), 255]);
+                row[4 * x..4 * x + 4].copy_from_slice(&[
+                    to_srgb8(c[0]),
+                    to_srgb8(c[1]),
+                    to_srgb8(c[2]),
+                    255,
+                ]);
             }
             row_done();
             Ok(stats)

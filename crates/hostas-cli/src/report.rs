@@ -11,7 +11,10 @@ pub struct Table {
 
 impl Table {
     pub fn new<S: Into<String>>(header: impl IntoIterator<Item = S>) -> Table {
-        Table { header: header.into_iter().map(Into::into).collect(), rows: Vec::new() }
+        Table {
+            header: header.into_iter().map(Into::into).collect(),
+            rows: Vec::new(),
+        }
     }
     pub fn row<S: Into<String>>(&mut self, cells: impl IntoIterator<Item = S>) {
         self.rows.push(cells.into_iter().map(Into::into).collect());
@@ -21,7 +24,10 @@ impl Table {
     }
 
     pub fn render(&self) -> String {
-        let cols = self.header.len().max(self.rows.iter().map(Vec::len).max().unwrap_or(0));
+        let cols = self
+            .header
+            .len()
+            .max(self.rows.iter().map(Vec::len).max().unwrap_or(0));
         let mut width = vec![0usize; cols];
         for r in std::iter::once(&self.header).chain(&self.rows) {
             for (i, c) in r.iter().enumerate() {
@@ -30,7 +36,10 @@ impl Table {
         }
         let numeric = |s: &str| {
             let s = s.trim_end_matches(['%', 'x']);
-            !s.is_empty() && s.chars().all(|c| c.is_ascii_digit() || ".,-+e ".contains(c)) && s.chars().any(|c| c.is_ascii_digit())
+            !s.is_empty()
+                && s.chars()
+                    .all(|c| c.is_ascii_digit() || ".,-+e ".contains(c))
+                && s.chars().any(|c| c.is_ascii_digit())
         };
         let mut out = String::new();
         let line = |out: &mut String, r: &[String]| {
@@ -103,7 +112,14 @@ pub fn ms(secs: f64) -> String {
 /// A UUID as 32 hex digits in 8-4-4-4-12 groups.
 pub fn uuid(u: &[u8; 16]) -> String {
     let h: Vec<String> = u.iter().map(|b| format!("{b:02x}")).collect();
-    format!("{}-{}-{}-{}-{}", h[..4].concat(), h[4..6].concat(), h[6..8].concat(), h[8..10].concat(), h[10..].concat())
+    format!(
+        "{}-{}-{}-{}-{}",
+        h[..4].concat(),
+        h[4..6].concat(),
+        h[6..8].concat(),
+        h[8..10].concat(),
+        h[10..].concat()
+    )
 }
 
 /// Names of the set bits of `VkBuildAccelerationStructureFlagsKHR`.
@@ -141,7 +157,10 @@ mod tests {
         assert_eq!(thousands(12), "12");
         assert_eq!(bytes(2048), "2.0 KiB");
         assert_eq!(uuid(&[0xab; 16]), "abababab-abab-abab-abab-abababababab");
-        assert_eq!(build_flag_names(0x4 | 0x2), vec!["ALLOW_COMPACTION", "PREFER_FAST_TRACE"]);
+        assert_eq!(
+            build_flag_names(0x4 | 0x2),
+            vec!["ALLOW_COMPACTION", "PREFER_FAST_TRACE"]
+        );
     }
 
     #[test]

@@ -47,7 +47,10 @@ pub struct Surface {
 /// Object-space point at distance `t` along the ray of the candidate (`committed = false`) or
 /// the committed intersection.
 pub fn object_point(q: &RayQuery, committed: bool, t: f32) -> Option<V3> {
-    Some(add(q.object_ray_origin(committed)?, scale(q.object_ray_direction(committed)?, t)))
+    Some(add(
+        q.object_ray_origin(committed)?,
+        scale(q.object_ray_direction(committed)?, t),
+    ))
 }
 
 /// Runs the query to its end with `programs` deciding on candidates.
@@ -56,11 +59,10 @@ fn run<'s>(scene: &'s Scene, ray: &Ray, programs: &impl Programs) -> hostas::Res
     while q.proceed() {
         let c = *q.candidate();
         match c.candidate_type() {
-            Some(CandidateType::Triangle) => {
-                if programs.any_hit(&q, &c) {
-                    q.confirm_intersection()?;
-                }
+            Some(CandidateType::Triangle) if programs.any_hit(&q, &c) => {
+                q.confirm_intersection()?
             }
+            Some(CandidateType::Triangle) => {}
             Some(CandidateType::Aabb) => {
                 if let Some(t) = programs.intersect(&q, &c) {
                     // Outside [tMin, closest so far] the hit is dropped, as a shader's is.
@@ -80,7 +82,11 @@ pub fn occluded(scene: &Scene, ray: &Ray, programs: &impl Programs) -> hostas::R
 }
 
 /// The closest hit, or `None` on a miss.
-pub fn trace(scene: &Scene, ray: &Ray, programs: &impl Programs) -> hostas::Result<Option<Surface>> {
+pub fn trace(
+    scene: &Scene,
+    ray: &Ray,
+    programs: &impl Programs,
+) -> hostas::Result<Option<Surface>> {
     let q = run(scene, ray, programs)?;
     let c = *q.committed();
     let kind = match c.committed_type() {
@@ -101,12 +107,20 @@ pub fn trace(scene: &Scene, ray: &Ray, programs: &impl Programs) -> hostas::Resu
     let position = add(ray.origin, scale(ray.direction, c.t));
     let object_position = object_point(&q, true, c.t).unwrap_or(position);
     let object_normal = match kind {
-        HitKind::Triangle => q.triangle_vertex_positions(true).ok().map(|v| cross(sub(v[1], v[0]), sub(v[2], v[0]))),
+        HitKind::Triangle => q
+            .triangle_vertex_positions(true)
+            .ok()
+            .map(|v| cross(sub(v[1], v[0]), sub(v[2], v[0]))),
         _ => programs.procedural_normal(&c, object_position),
     };
     let normal = object_normal.and_then(|n| {
         let w = normalize(transpose_vector(&q.world_to_object(true)?, n));
         (w != [0.0; 3]).then_some(w)
     });
-    Ok(Some(Surface { hit, position, object_position, normal }))
+    Ok(Some(Surface {
+        hit,
+        position,
+        object_position,
+        normal,
+    }))
 }

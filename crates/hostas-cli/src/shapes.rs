@@ -9,7 +9,11 @@ use std::collections::HashMap;
 use std::f32::consts::{PI, TAU};
 
 fn mesh(name: &str, positions: Vec<V3>, indices: Vec<[u32; 3]>) -> Mesh {
-    Mesh { name: name.to_owned(), positions, indices }
+    Mesh {
+        name: name.to_owned(),
+        positions,
+        indices,
+    }
 }
 
 /// Six times the signed volume enclosed by the triangles (positive when wound outward).
@@ -100,7 +104,10 @@ pub fn icosphere(level: u32) -> Mesh {
         let mut mid: HashMap<(u32, u32), u32> = HashMap::new();
         let mut midpoint = |a: u32, b: u32, positions: &mut Vec<V3>| {
             *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                positions.push(normalize(scale(add(positions[a as usize], positions[b as usize]), 0.5)));
+                positions.push(normalize(scale(
+                    add(positions[a as usize], positions[b as usize]),
+                    0.5,
+                )));
                 positions.len() as u32 - 1
             })
         };
@@ -130,7 +137,14 @@ pub fn torus_knot(p: u32, q: u32, tube: f32, nu: u32, nv: u32) -> Mesh {
     let curve = |s: f32| -> V3 {
         let phi = s * TAU;
         let r = 2.0 + (q as f32 * phi).cos();
-        scale([r * (p as f32 * phi).cos(), -(q as f32 * phi).sin(), r * (p as f32 * phi).sin()], 0.5)
+        scale(
+            [
+                r * (p as f32 * phi).cos(),
+                -(q as f32 * phi).sin(),
+                r * (p as f32 * phi).sin(),
+            ],
+            0.5,
+        )
     };
     let mut m = wrapped_surface(&format!("knot-{p}-{q}"), nu, nv, |u, v| {
         let e = 1e-3;
@@ -157,7 +171,14 @@ pub fn push_box(m: &mut Mesh, lo: V3, hi: V3) {
         ]);
     }
     // Quads as corner bit patterns, counter-clockwise seen from outside.
-    for q in [[0, 4, 6, 2], [1, 3, 7, 5], [0, 1, 5, 4], [2, 6, 7, 3], [0, 2, 3, 1], [4, 5, 7, 6]] {
+    for q in [
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+    ] {
         m.indices.push([base + q[0], base + q[1], base + q[2]]);
         m.indices.push([base + q[0], base + q[2], base + q[3]]);
     }
@@ -180,7 +201,11 @@ pub fn spiral_stairs(steps: u32) -> Mesh {
         let (sin, cos) = a.sin_cos();
         // A block from radius 0.2 to 1.0, rotated by `a` (rotation of the corners about y).
         let base = m.positions.len() as u32;
-        push_box(&mut m, [0.2, 0.0, -0.12], [1.0, (s + 1) as f32 * height, 0.12]);
+        push_box(
+            &mut m,
+            [0.2, 0.0, -0.12],
+            [1.0, (s + 1) as f32 * height, 0.12],
+        );
         for p in &mut m.positions[base as usize..] {
             let (x, z) = (p[0], p[2]);
             *p = [x * cos - z * sin, p[1], x * sin + z * cos];
@@ -188,10 +213,15 @@ pub fn spiral_stairs(steps: u32) -> Mesh {
     }
     // The centre column.
     let mut pillar = mesh("pillar", Vec::new(), Vec::new());
-    push_box(&mut pillar, [-0.2, 0.0, -0.2], [0.2, steps as f32 * height + 0.1, 0.2]);
+    push_box(
+        &mut pillar,
+        [-0.2, 0.0, -0.2],
+        [0.2, steps as f32 * height + 0.1, 0.2],
+    );
     let base = m.positions.len() as u32;
     m.positions.extend(pillar.positions);
-    m.indices.extend(pillar.indices.iter().map(|t| t.map(|i| i + base)));
+    m.indices
+        .extend(pillar.indices.iter().map(|t| t.map(|i| i + base)));
     m
 }
 
@@ -200,7 +230,11 @@ pub fn floor(half: f32, n: u32) -> Mesh {
     let mut positions = Vec::new();
     for i in 0..=n {
         for j in 0..=n {
-            positions.push([-half + 2.0 * half * j as f32 / n as f32, 0.0, -half + 2.0 * half * i as f32 / n as f32]);
+            positions.push([
+                -half + 2.0 * half * j as f32 / n as f32,
+                0.0,
+                -half + 2.0 * half * i as f32 / n as f32,
+            ]);
         }
     }
     let w = n + 1;
@@ -256,8 +290,17 @@ mod tests {
             }
         }
         for (&(a, b), &n) in &edges {
-            assert_eq!(n, 1, "{}: edge {a}-{b} used {n} times in one direction", m.name);
-            assert_eq!(edges.get(&(b, a)), Some(&1), "{}: edge {a}-{b} has no twin", m.name);
+            assert_eq!(
+                n, 1,
+                "{}: edge {a}-{b} used {n} times in one direction",
+                m.name
+            );
+            assert_eq!(
+                edges.get(&(b, a)),
+                Some(&1),
+                "{}: edge {a}-{b} has no twin",
+                m.name
+            );
         }
         assert!(signed_volume6(m) > 0.0, "{} is wound inward", m.name);
     }
@@ -291,9 +334,24 @@ mod facing_tests {
     fn outside_is_front_facing_even_mirrored() {
         let d = Device::new();
         let m = icosphere(2);
-        let blas = hostas::quick::build_triangle_blas(&d, &m.positions, &m.indices, vk::BuildAccelerationStructureFlagsKHR::empty()).unwrap();
-        let mirror = Affine::from_rows([-1.0, 0.0, 0.0, 5.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
-        let tlas = hostas::quick::build_tlas(&d, &[hostas::quick::instance(blas, Affine::IDENTITY), hostas::quick::instance(blas, mirror)], vk::BuildAccelerationStructureFlagsKHR::empty()).unwrap();
+        let blas = hostas::quick::build_triangle_blas(
+            &d,
+            &m.positions,
+            &m.indices,
+            vk::BuildAccelerationStructureFlagsKHR::empty(),
+        )
+        .unwrap();
+        let mirror =
+            Affine::from_rows([-1.0, 0.0, 0.0, 5.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        let tlas = hostas::quick::build_tlas(
+            &d,
+            &[
+                hostas::quick::instance(blas, Affine::IDENTITY),
+                hostas::quick::instance(blas, mirror),
+            ],
+            vk::BuildAccelerationStructureFlagsKHR::empty(),
+        )
+        .unwrap();
         let scene = d.scene(tlas).unwrap();
         for (x, id) in [(0.0, 0), (5.0, 1)] {
             for dir in [[0.0, 0.0, -1.0], [1.0, 0.3, 0.2], [-0.2, -1.0, 0.1]] {

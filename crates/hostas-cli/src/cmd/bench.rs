@@ -5,10 +5,12 @@ use crate::geom::{Rng, add, cross, length, normalize, scale, sub};
 use crate::mesh::Mesh;
 use crate::render::Camera;
 use crate::report::{Table, thousands};
-use crate::{shapes, input, note, progress};
+use crate::{input, note, progress, shapes};
 use anyhow::{Result, anyhow, bail};
 use clap::{Args, ValueEnum};
-use hostas::{AccelerationStructure, AccelerationStructureCreateInfo, BuildGeometryInfo, Device, Ray, vk};
+use hostas::{
+    AccelerationStructure, AccelerationStructureCreateInfo, BuildGeometryInfo, Device, Ray, vk,
+};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -41,7 +43,12 @@ pub enum Preset {
 }
 
 impl Preset {
-    const ALL: [Preset; 4] = [Preset::FastTrace, Preset::FastBuild, Preset::Default, Preset::LowMemory];
+    const ALL: [Preset; 4] = [
+        Preset::FastTrace,
+        Preset::FastBuild,
+        Preset::Default,
+        Preset::LowMemory,
+    ];
     fn name(self) -> &'static str {
         match self {
             Preset::FastTrace => "fast-trace",
@@ -136,7 +143,10 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-fn triangles_geometry<'a>(positions: &'a [[f32; 3]], indices: &'a [[u32; 3]]) -> hostas::Geometry<'a> {
+fn triangles_geometry<'a>(
+    positions: &'a [[f32; 3]],
+    indices: &'a [[u32; 3]],
+) -> hostas::Geometry<'a> {
     hostas::Geometry::triangles(
         hostas::TrianglesData {
             vertex_format: vk::Format::R32G32B32_SFLOAT,
@@ -170,9 +180,18 @@ fn target(device: &Device, m: &Mesh, flags: F) -> Result<Target> {
         geometries: &geoms,
         scratch: None,
     };
-    let sizes = device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &[m.indices.len() as u32]).map_err(|e| anyhow!("{e}"))?;
+    let sizes = device
+        .build_sizes(
+            vk::AccelerationStructureBuildTypeKHR::HOST,
+            &probe,
+            &[m.indices.len() as u32],
+        )
+        .map_err(|e| anyhow!("{e}"))?;
     let dst = device
-        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, sizes.acceleration_structure_size))
+        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            sizes.acceleration_structure_size,
+        ))
         .map_err(|e| anyhow!("{e}"))?;
     Ok(Target {
         dst,
@@ -183,20 +202,40 @@ fn target(device: &Device, m: &Mesh, flags: F) -> Result<Target> {
 }
 
 /// Builds (or updates in place) `t.dst` from `positions`; returns the seconds taken.
-fn build_into(device: &Device, t: &mut Target, positions: &[[f32; 3]], indices: &[[u32; 3]], flags: F, update: bool) -> Result<f64> {
+fn build_into(
+    device: &Device,
+    t: &mut Target,
+    positions: &[[f32; 3]],
+    indices: &[[u32; 3]],
+    flags: F,
+    update: bool,
+) -> Result<f64> {
     let geoms = [triangles_geometry(positions, indices)];
-    let range = [hostas::BuildRangeInfo { primitive_count: indices.len() as u32, ..Default::default() }];
+    let range = [hostas::BuildRangeInfo {
+        primitive_count: indices.len() as u32,
+        ..Default::default()
+    }];
     let info = BuildGeometryInfo {
         ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
         flags,
-        mode: if update { vk::BuildAccelerationStructureModeKHR::UPDATE } else { vk::BuildAccelerationStructureModeKHR::BUILD },
+        mode: if update {
+            vk::BuildAccelerationStructureModeKHR::UPDATE
+        } else {
+            vk::BuildAccelerationStructureModeKHR::BUILD
+        },
         src: update.then_some(t.dst),
         dst: Some(t.dst),
         geometries: &geoms,
-        scratch: Some(if update { &mut t.update_scratch } else { &mut t.scratch }),
+        scratch: Some(if update {
+            &mut t.update_scratch
+        } else {
+            &mut t.scratch
+        }),
     };
     let start = Instant::now();
-    device.build_acceleration_structures(&mut [info], &[&range]).map_err(|e| anyhow!("{e}"))?;
+    device
+        .build_acceleration_structures(&mut [info], &[&range])
+        .map_err(|e| anyhow!("{e}"))?;
     Ok(start.elapsed().as_secs_f64())
 }
 
@@ -220,7 +259,11 @@ fn trace_speed(device: &Device, tlas: AccelerationStructure, rays: &[Ray]) -> Re
     let start = Instant::now();
     let n: usize = rays
         .par_chunks(1024)
-        .map(|c| c.iter().map(|r| scene.trace_closest(r).map(|h| h.is_hit() as usize)).sum::<hostas::Result<usize>>())
+        .map(|c| {
+            c.iter()
+                .map(|r| scene.trace_closest(r).map(|h| h.is_hit() as usize))
+                .sum::<hostas::Result<usize>>()
+        })
         .collect::<hostas::Result<Vec<usize>>>()
         .map_err(|e| anyhow!("{e}"))?
         .into_iter()
@@ -246,7 +289,10 @@ fn primary_rays(m: &Mesh, count: u32) -> Vec<Ray> {
             }
             let u = (2.0 * (x as f32 + 0.5) / side as f32 - 1.0) * half;
             let v = (1.0 - 2.0 * (y as f32 + 0.5) / side as f32) * half;
-            rays.push(Ray::new(cam.eye, add(fwd, add(scale(right, u), scale(up, v)))));
+            rays.push(Ray::new(
+                cam.eye,
+                add(fwd, add(scale(right, u), scale(up, v))),
+            ));
         }
     }
     rays
@@ -274,39 +320,77 @@ fn incoherent_rays(m: &Mesh, count: u32) -> Vec<Ray> {
         .collect()
 }
 
-fn measure(device: &Device, m: &Mesh, preset: Preset, args: &BenchArgs, step: &dyn Fn(&str)) -> Result<Row> {
+fn measure(
+    device: &Device,
+    m: &Mesh,
+    preset: Preset,
+    args: &BenchArgs,
+    step: &dyn Fn(&str),
+) -> Result<Row> {
     let flags = preset.flags();
     let n = m.indices.len() as u64;
     // Build.
     step("build");
     let mut t = target(device, m, flags)?;
-    let (build_s, reps) = timed(args.reps, || build_into(device, &mut t, &m.positions, &m.indices, flags, false))?;
+    let (build_s, reps) = timed(args.reps, || {
+        build_into(device, &mut t, &m.positions, &m.indices, flags, false)
+    })?;
     let stats = device.statistics(t.dst).map_err(|e| anyhow!("{e}"))?;
     let size = t.size;
-    device.destroy_acceleration_structure(t.dst).map_err(|e| anyhow!("{e}"))?;
+    device
+        .destroy_acceleration_structure(t.dst)
+        .map_err(|e| anyhow!("{e}"))?;
     drop(t);
     // Compaction.
     step("compact");
     let mut c = target(device, m, flags | F::ALLOW_COMPACTION)?;
-    build_into(device, &mut c, &m.positions, &m.indices, flags | F::ALLOW_COMPACTION, false)?;
-    let compacted = device.acceleration_structure_property(c.dst, vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR).map_err(|e| anyhow!("{e}"))?;
+    build_into(
+        device,
+        &mut c,
+        &m.positions,
+        &m.indices,
+        flags | F::ALLOW_COMPACTION,
+        false,
+    )?;
+    let compacted = device
+        .acceleration_structure_property(
+            c.dst,
+            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+        )
+        .map_err(|e| anyhow!("{e}"))?;
     let small = device
-        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, compacted))
+        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            compacted,
+        ))
         .map_err(|e| anyhow!("{e}"))?;
     let (compact_s, _) = timed(args.reps, || {
         let start = Instant::now();
-        device.copy_acceleration_structure(c.dst, small, vk::CopyAccelerationStructureModeKHR::COMPACT).map_err(|e| anyhow!("{e}"))?;
+        device
+            .copy_acceleration_structure(
+                c.dst,
+                small,
+                vk::CopyAccelerationStructureModeKHR::COMPACT,
+            )
+            .map_err(|e| anyhow!("{e}"))?;
         Ok(start.elapsed().as_secs_f64())
     })?;
-    device.destroy_acceleration_structure(c.dst).map_err(|e| anyhow!("{e}"))?;
+    device
+        .destroy_acceleration_structure(c.dst)
+        .map_err(|e| anyhow!("{e}"))?;
     drop(c);
     // Trace, on the compacted structure.
     step("trace");
-    let tlas = hostas::quick::build_single_instance_tlas(device, small).map_err(|e| anyhow!("{e}"))?;
+    let tlas =
+        hostas::quick::build_single_instance_tlas(device, small).map_err(|e| anyhow!("{e}"))?;
     let primary = trace_speed(device, tlas, &primary_rays(m, args.rays))?;
     let incoherent = trace_speed(device, tlas, &incoherent_rays(m, args.rays))?;
-    device.destroy_acceleration_structure(tlas).map_err(|e| anyhow!("{e}"))?;
-    device.destroy_acceleration_structure(small).map_err(|e| anyhow!("{e}"))?;
+    device
+        .destroy_acceleration_structure(tlas)
+        .map_err(|e| anyhow!("{e}"))?;
+    device
+        .destroy_acceleration_structure(small)
+        .map_err(|e| anyhow!("{e}"))?;
     // Refit.
     step("refit");
     let uflags = flags | F::ALLOW_UPDATE;
@@ -315,13 +399,26 @@ fn measure(device: &Device, m: &Mesh, preset: Preset, args: &BenchArgs, step: &d
     let (lo, hi) = m.bounds();
     let jitter = 1e-3 * length(sub(hi, lo));
     let mut rng = Rng::new(11);
-    let moved: Vec<[f32; 3]> = m.positions.iter().map(|p| add(*p, scale(rng.unit_vector(), jitter * rng.f32()))).collect();
+    let moved: Vec<[f32; 3]> = m
+        .positions
+        .iter()
+        .map(|p| add(*p, scale(rng.unit_vector(), jitter * rng.f32())))
+        .collect();
     let mut flip = false;
     let (refit_s, _) = timed(args.reps, || {
         flip = !flip;
-        build_into(device, &mut u, if flip { &moved } else { &m.positions }, &m.indices, uflags, true)
+        build_into(
+            device,
+            &mut u,
+            if flip { &moved } else { &m.positions },
+            &m.indices,
+            uflags,
+            true,
+        )
     })?;
-    device.destroy_acceleration_structure(u.dst).map_err(|e| anyhow!("{e}"))?;
+    device
+        .destroy_acceleration_structure(u.dst)
+        .map_err(|e| anyhow!("{e}"))?;
     Ok(Row {
         mesh: m.name.clone(),
         triangles: n,
@@ -347,13 +444,23 @@ fn shared_meshes(dir: &Path) -> Result<Vec<PathBuf>> {
         .map_err(|e| anyhow!("{}: cannot list: {e}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| {
-            let n = p.file_name().map(|n| n.to_string_lossy().to_ascii_lowercase()).unwrap_or_default();
+            let n = p
+                .file_name()
+                .map(|n| n.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default();
             let n = n.strip_suffix(".xz").unwrap_or(&n);
-            [".obj", ".ply", ".gltf", ".glb"].iter().any(|e| n.ends_with(e))
+            [".obj", ".ply", ".gltf", ".glb"]
+                .iter()
+                .any(|e| n.ends_with(e))
         })
         .collect();
     // Smallest files first: quick results come early.
-    out.sort_by_key(|p| (std::fs::metadata(p).map(|m| m.len()).unwrap_or(0), p.clone()));
+    out.sort_by_key(|p| {
+        (
+            std::fs::metadata(p).map(|m| m.len()).unwrap_or(0),
+            p.clone(),
+        )
+    });
     Ok(out)
 }
 
@@ -382,7 +489,10 @@ pub fn run(a: BenchArgs) -> Result<()> {
             sources.push(Source::Builtin(builtin_sphere));
             sources.push(Source::Builtin(builtin_knot));
         }
-        let dir = a.dir.clone().unwrap_or_else(|| PathBuf::from("../shared/meshes"));
+        let dir = a
+            .dir
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("../shared/meshes"));
         if dir.is_dir() {
             let found = shared_meshes(&dir)?;
             note!("meshes from {}: {}", dir.display(), found.len());
@@ -393,24 +503,47 @@ pub fn run(a: BenchArgs) -> Result<()> {
         } else if a.dir.is_some() {
             bail!("{}: not a directory", dir.display());
         } else {
-            note!("{} is absent: measuring the built-in scenes only (give meshes as arguments or --meshes DIR)", dir.display());
+            note!(
+                "{} is absent: measuring the built-in scenes only (give meshes as arguments or --meshes DIR)",
+                dir.display()
+            );
         }
     } else {
         sources.extend(a.meshes.iter().cloned().map(Source::File));
     }
     if sources.is_empty() {
         match empty_dir {
-            Some(d) => bail!("nothing to measure: {} holds no meshes and --no-builtin was given", d.display()),
-            None => bail!("nothing to measure: no meshes given, and --no-builtin with no mesh directory"),
+            Some(d) => bail!(
+                "nothing to measure: {} holds no meshes and --no-builtin was given",
+                d.display()
+            ),
+            None => bail!(
+                "nothing to measure: no meshes given, and --no-builtin with no mesh directory"
+            ),
         }
     }
     let threads = rayon::current_num_threads();
-    note!("{} mesh(es) x {} preset(s) on {threads} thread(s)", sources.len(), a.presets.len());
+    note!(
+        "{} mesh(es) x {} preset(s) on {threads} thread(s)",
+        sources.len(),
+        a.presets.len()
+    );
     let device = Device::new();
     let total = (sources.len() * a.presets.len()) as u64;
     let pb = progress::bar(total, "");
     let mut table = Table::new([
-        "mesh", "triangles", "preset", "build ms", "Mtris/s", "SAH", "B/tri", "compact B/tri", "compact ms", "primary Mrays/s", "incoh. Mrays/s", "refit Mtris/s",
+        "mesh",
+        "triangles",
+        "preset",
+        "build ms",
+        "Mtris/s",
+        "SAH",
+        "B/tri",
+        "compact B/tri",
+        "compact ms",
+        "primary Mrays/s",
+        "incoh. Mrays/s",
+        "refit Mtris/s",
     ]);
     for s in &sources {
         let m = match s {

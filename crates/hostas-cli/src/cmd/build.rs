@@ -46,7 +46,14 @@ pub fn run(a: BuildArgs) -> Result<()> {
     type F = vk::BuildAccelerationStructureFlagsKHR;
     let flags = a.preset.flags();
     let device = hostas::Device::new();
-    let mut table = Table::new(["structure", "triangles", "build ms", "size", "compacted", "B/tri"]);
+    let mut table = Table::new([
+        "structure",
+        "triangles",
+        "build ms",
+        "size",
+        "compacted",
+        "B/tri",
+    ]);
     let mut blases = Vec::new();
     let mut bounds: Option<([f32; 3], [f32; 3])> = None;
     let mut total_tris = 0u64;
@@ -56,13 +63,25 @@ pub fn run(a: BuildArgs) -> Result<()> {
         if lo.iter().chain(hi.iter()).all(|v| v.is_finite()) {
             bounds = Some(match bounds {
                 None => (lo, hi),
-                Some((l, h)) => ([0, 1, 2].map(|k| l[k].min(lo[k])), [0, 1, 2].map(|k| h[k].max(hi[k]))),
+                Some((l, h)) => (
+                    [0, 1, 2].map(|k| l[k].min(lo[k])),
+                    [0, 1, 2].map(|k| h[k].max(hi[k])),
+                ),
             });
         }
-        let pb = progress::spinner(format!("building {} ({} triangles)", m.name, thousands(m.indices.len() as u64)));
+        let pb = progress::spinner(format!(
+            "building {} ({} triangles)",
+            m.name,
+            thousands(m.indices.len() as u64)
+        ));
         let t = Instant::now();
-        let blas = hostas::quick::build_triangle_blas(&device, &m.positions, &m.indices, flags | F::ALLOW_DATA_ACCESS)
-            .map_err(|e| anyhow!("{}: building: {e}", path.display()));
+        let blas = hostas::quick::build_triangle_blas(
+            &device,
+            &m.positions,
+            &m.indices,
+            flags | F::ALLOW_DATA_ACCESS,
+        )
+        .map_err(|e| anyhow!("{}: building: {e}", path.display()));
         let secs = t.elapsed().as_secs_f64();
         pb.finish_and_clear();
         let mut blas = blas?;
@@ -70,14 +89,25 @@ pub fn run(a: BuildArgs) -> Result<()> {
         let mut compacted = "-".to_string();
         let mut final_size = size;
         if a.preset.compact {
-            let (c, _, after) = ops::compact(&device, blas, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL)?;
+            let (c, _, after) = ops::compact(
+                &device,
+                blas,
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            )?;
             blas = c;
             compacted = bytes(after);
             final_size = after;
         }
         let tris = m.indices.len() as u64;
         total_tris += tris;
-        table.row([format!("BLAS {} ({})", blases.len(), m.name), thousands(tris), ms(secs), bytes(size), compacted, format!("{:.1}", final_size as f64 / tris as f64)]);
+        table.row([
+            format!("BLAS {} ({})", blases.len(), m.name),
+            thousands(tris),
+            ms(secs),
+            bytes(size),
+            compacted,
+            format!("{:.1}", final_size as f64 / tris as f64),
+        ]);
         blases.push((m.name.clone(), blas));
     }
     let instances: Vec<_> = blases
@@ -90,16 +120,25 @@ pub fn run(a: BuildArgs) -> Result<()> {
         })
         .collect();
     let t = Instant::now();
-    let mut tlas = hostas::quick::build_tlas(&device, &instances, flags).map_err(|e| anyhow!("building the top level: {e}"))?;
+    let mut tlas = hostas::quick::build_tlas(&device, &instances, flags)
+        .map_err(|e| anyhow!("building the top level: {e}"))?;
     let secs = t.elapsed().as_secs_f64();
     let size = ops::allocated(&device, tlas);
     let mut compacted = "-".to_string();
     if a.preset.compact {
-        let (c, _, after) = ops::compact(&device, tlas, vk::AccelerationStructureTypeKHR::TOP_LEVEL)?;
+        let (c, _, after) =
+            ops::compact(&device, tlas, vk::AccelerationStructureTypeKHR::TOP_LEVEL)?;
         tlas = c;
         compacted = bytes(after);
     }
-    table.row([format!("TLAS ({} instances)", instances.len()), "-".into(), ms(secs), bytes(size), compacted, "-".into()]);
+    table.row([
+        format!("TLAS ({} instances)", instances.len()),
+        "-".into(),
+        ms(secs),
+        bytes(size),
+        compacted,
+        "-".into(),
+    ]);
     let container = Container::from_device(&device, &blases, tlas, bounds)?;
     let out = container.to_bytes();
     write_file(&a.output, &out)?;
@@ -110,6 +149,10 @@ pub fn run(a: BuildArgs) -> Result<()> {
         a.output.display(),
         bytes(out.len() as u64),
         thousands(total_tris),
-        if names.is_empty() { "none (default preset)".to_string() } else { names.join(" | ") }
+        if names.is_empty() {
+            "none (default preset)".to_string()
+        } else {
+            names.join(" | ")
+        }
     ))
 }

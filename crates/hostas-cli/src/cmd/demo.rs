@@ -3,15 +3,19 @@
 
 use crate::cli::print;
 use crate::container::Container;
-use crate::geom::{V3, add, compose, dot, lerp, normalize, rotation, scale, scaling, sub, translation};
+use crate::geom::{
+    V3, add, compose, dot, lerp, normalize, rotation, scale, scaling, sub, translation,
+};
 use crate::mesh::Mesh;
 use crate::render::{Camera, Look, RenderStats, render};
 use crate::report::{Table, bytes, ms, thousands};
 use crate::shade::{Programs, Surface, object_point};
-use crate::{shapes, ops, progress};
+use crate::{ops, progress, shapes};
 use anyhow::{Result, anyhow, ensure};
 use clap::Args;
-use hostas::{AccelerationStructure, Aabb, Affine, Device, Instance, Intersection, Ray, RayQuery, vk};
+use hostas::{
+    Aabb, AccelerationStructure, Affine, Device, Instance, Intersection, Ray, RayQuery, vk,
+};
 use rayon::prelude::*;
 use std::f32::consts::{FRAC_PI_2, PI, TAU};
 use std::path::PathBuf;
@@ -38,7 +42,12 @@ Examples:
 #[command(after_help = AFTER_HELP)]
 pub struct DemoArgs {
     /// The PNG to write
-    #[arg(short, long, value_name = "IMAGE.png", default_value = "hostas-demo.png")]
+    #[arg(
+        short,
+        long,
+        value_name = "IMAGE.png",
+        default_value = "hostas-demo.png"
+    )]
     pub output: PathBuf,
     /// Image width in pixels
     #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(1..=16384))]
@@ -60,8 +69,14 @@ const MAT_CORE: u32 = 4;
 
 /// One bottom-level structure of the demo.
 enum Shape {
-    Triangles { mesh: Mesh, opaque: bool },
-    Spheres { name: String, spheres: Vec<(V3, f32)> },
+    Triangles {
+        mesh: Mesh,
+        opaque: bool,
+    },
+    Spheres {
+        name: String,
+        spheres: Vec<(V3, f32)>,
+    },
 }
 
 impl Shape {
@@ -120,11 +135,26 @@ fn double_helix() -> Vec<(V3, f32)> {
 
 fn scene() -> DemoScene {
     let shapes = vec![
-        Shape::Triangles { mesh: shapes::floor(1.0, 16), opaque: true },
-        Shape::Triangles { mesh: shapes::torus_knot(2, 3, 0.26, 768, 32), opaque: true },
-        Shape::Triangles { mesh: shapes::icosphere(4), opaque: true },
-        Shape::Triangles { mesh: shapes::torus(1.0, 0.38, 96, 48), opaque: true },
-        Shape::Triangles { mesh: shapes::spiral_stairs(30), opaque: true },
+        Shape::Triangles {
+            mesh: shapes::floor(1.0, 16),
+            opaque: true,
+        },
+        Shape::Triangles {
+            mesh: shapes::torus_knot(2, 3, 0.26, 768, 32),
+            opaque: true,
+        },
+        Shape::Triangles {
+            mesh: shapes::icosphere(4),
+            opaque: true,
+        },
+        Shape::Triangles {
+            mesh: shapes::torus(1.0, 0.38, 96, 48),
+            opaque: true,
+        },
+        Shape::Triangles {
+            mesh: shapes::spiral_stairs(30),
+            opaque: true,
+        },
         Shape::Triangles {
             mesh: {
                 let mut m = shapes::icosphere(5);
@@ -133,30 +163,83 @@ fn scene() -> DemoScene {
             },
             opaque: false,
         },
-        Shape::Spheres { name: "double helix".into(), spheres: double_helix() },
+        Shape::Spheres {
+            name: "double helix".into(),
+            spheres: double_helix(),
+        },
     ];
     let (floor, knot, ico, torus, stairs, lattice, helix) = (0, 1, 2, 3, 4, 5, 6);
     let mut instances = Vec::new();
-    let mut put = |shape: Option<usize>, transform: Affine, material: u32| instances.push(Placed { shape, transform, material });
+    let mut put = |shape: Option<usize>, transform: Affine, material: u32| {
+        instances.push(Placed {
+            shape,
+            transform,
+            material,
+        })
+    };
     put(Some(floor), scaling([30.0, 1.0, 30.0]), MAT_FLOOR);
     // The knot, upright, and its mirror image.
     let upright = rotation([1.0, 0.0, 0.0], FRAC_PI_2);
     let knot_at = |x: f32, mirror: bool| {
-        let m = if mirror { scaling([-1.0, 1.0, 1.0]) } else { Affine::IDENTITY };
-        compose(&translation([x, 1.95, -0.6]), &compose(&m, &compose(&rotation([0.0, 1.0, 0.0], 0.35), &upright)))
+        let m = if mirror {
+            scaling([-1.0, 1.0, 1.0])
+        } else {
+            Affine::IDENTITY
+        };
+        compose(
+            &translation([x, 1.95, -0.6]),
+            &compose(&m, &compose(&rotation([0.0, 1.0, 0.0], 0.35), &upright)),
+        )
     };
     put(Some(knot), knot_at(-2.3, false), MAT_DEFAULT);
     put(Some(knot), knot_at(2.3, true), MAT_DEFAULT);
     // Stairs and their mirror image.
-    put(Some(stairs), compose(&translation([-4.7, 0.0, 1.0]), &scaling([1.3, 1.0, 1.3])), MAT_DEFAULT);
-    put(Some(stairs), compose(&translation([4.7, 0.0, 1.0]), &scaling([-1.3, 1.0, 1.3])), MAT_DEFAULT);
+    put(
+        Some(stairs),
+        compose(&translation([-4.7, 0.0, 1.0]), &scaling([1.3, 1.0, 1.3])),
+        MAT_DEFAULT,
+    );
+    put(
+        Some(stairs),
+        compose(&translation([4.7, 0.0, 1.0]), &scaling([-1.3, 1.0, 1.3])),
+        MAT_DEFAULT,
+    );
     // The lattice globe with a core.
-    put(Some(lattice), compose(&translation([0.0, 1.25, 3.2]), &compose(&rotation([0.3, 1.0, 0.2], 0.5), &scaling([1.2; 3]))), MAT_LATTICE);
-    put(Some(ico), compose(&translation([0.0, 1.25, 3.2]), &scaling([0.62; 3])), MAT_CORE);
+    put(
+        Some(lattice),
+        compose(
+            &translation([0.0, 1.25, 3.2]),
+            &compose(&rotation([0.3, 1.0, 0.2], 0.5), &scaling([1.2; 3])),
+        ),
+        MAT_LATTICE,
+    );
+    put(
+        Some(ico),
+        compose(&translation([0.0, 1.25, 3.2]), &scaling([0.62; 3])),
+        MAT_CORE,
+    );
     // Procedural helices.
-    put(Some(helix), compose(&translation([0.0, 0.0, -4.2]), &scaling([1.25; 3])), MAT_SPHERES);
-    put(Some(helix), compose(&translation([-4.6, 0.0, -3.2]), &rotation([0.0, 1.0, 0.0], 1.0)), MAT_SPHERES);
-    put(Some(helix), compose(&translation([4.6, 0.0, -3.2]), &rotation([0.0, 1.0, 0.0], 2.0)), MAT_SPHERES);
+    put(
+        Some(helix),
+        compose(&translation([0.0, 0.0, -4.2]), &scaling([1.25; 3])),
+        MAT_SPHERES,
+    );
+    put(
+        Some(helix),
+        compose(
+            &translation([-4.6, 0.0, -3.2]),
+            &rotation([0.0, 1.0, 0.0], 1.0),
+        ),
+        MAT_SPHERES,
+    );
+    put(
+        Some(helix),
+        compose(
+            &translation([4.6, 0.0, -3.2]),
+            &rotation([0.0, 1.0, 0.0], 2.0),
+        ),
+        MAT_SPHERES,
+    );
     // A crowd of small instances behind and beside the centre, one of them inactive.
     let mut rng = crate::geom::Rng::new(7);
     let mut k = 0;
@@ -168,11 +251,18 @@ fn scene() -> DemoScene {
             let spin = rotation([0.0, 1.0, 0.0], rng.range(0.0, TAU));
             let (shape, lift, tilt) = match (k * 7 + row) % 4 {
                 0 => (ico, s, Affine::IDENTITY),
-                1 => (torus, s * 1.05, rotation([1.0, 0.0, 0.0], rng.range(0.6, 1.4))),
+                1 => (
+                    torus,
+                    s * 1.05,
+                    rotation([1.0, 0.0, 0.0], rng.range(0.6, 1.4)),
+                ),
                 2 => (knot, s * 1.2, scaling([0.75; 3])),
                 _ => (stairs, 0.0, Affine::IDENTITY),
             };
-            let t = compose(&translation([x, lift, z]), &compose(&spin, &compose(&tilt, &scaling([s; 3]))));
+            let t = compose(
+                &translation([x, lift, z]),
+                &compose(&spin, &compose(&tilt, &scaling([s; 3]))),
+            );
             put(if k == 40 { None } else { Some(shape) }, t, MAT_DEFAULT);
             k += 1;
         }
@@ -182,7 +272,10 @@ fn scene() -> DemoScene {
         for i in 0..6 {
             let t = compose(
                 &translation([side * 8.6, 0.75, 3.5 - i as f32 * 1.9]),
-                &compose(&rotation([0.0, 0.0, 1.0], side * 0.4 + i as f32 * 0.3), &compose(&rotation([1.0, 0.0, 0.0], FRAC_PI_2), &scaling([0.55; 3]))),
+                &compose(
+                    &rotation([0.0, 0.0, 1.0], side * 0.4 + i as f32 * 0.3),
+                    &compose(&rotation([1.0, 0.0, 0.0], FRAC_PI_2), &scaling([0.55; 3])),
+                ),
             );
             put(Some(torus), t, MAT_DEFAULT);
         }
@@ -199,7 +292,10 @@ struct DemoPrograms<'a> {
 
 impl DemoPrograms<'_> {
     fn spheres(&self, instance: u32) -> Option<&[(V3, f32)]> {
-        match self.shapes.get(*self.instance_shape.get(instance as usize)?)? {
+        match self
+            .shapes
+            .get(*self.instance_shape.get(instance as usize)?)?
+        {
             Shape::Spheres { spheres, .. } => Some(spheres),
             _ => None,
         }
@@ -223,7 +319,9 @@ impl Programs for DemoPrograms<'_> {
     }
 
     fn intersect(&self, q: &RayQuery, c: &Intersection) -> Option<f32> {
-        let &(center, radius) = self.spheres(c.instance_id)?.get(c.primitive_index as usize)?;
+        let &(center, radius) = self
+            .spheres(c.instance_id)?
+            .get(c.primitive_index as usize)?;
         let (o, d) = (q.object_ray_origin(false)?, q.object_ray_direction(false)?);
         let oc = sub(o, center);
         let (a, b, cc) = (dot(d, d), dot(oc, d), dot(oc, oc) - radius * radius);
@@ -233,11 +331,15 @@ impl Programs for DemoPrograms<'_> {
         }
         let root = disc.sqrt();
         let t_min = q.ray().t_min;
-        [(-b - root) / a, (-b + root) / a].into_iter().find(|&t| t >= t_min)
+        [(-b - root) / a, (-b + root) / a]
+            .into_iter()
+            .find(|&t| t >= t_min)
     }
 
     fn procedural_normal(&self, c: &Intersection, p: V3) -> Option<V3> {
-        let &(center, _) = self.spheres(c.instance_id)?.get(c.primitive_index as usize)?;
+        let &(center, _) = self
+            .spheres(c.instance_id)?
+            .get(c.primitive_index as usize)?;
         Some(sub(p, center))
     }
 
@@ -248,11 +350,23 @@ impl Programs for DemoPrograms<'_> {
                 let p = s.position;
                 let check = ((p[0].floor() + p[2].floor()) as i64).rem_euclid(2) == 0;
                 let fade = (-(p[0] * p[0] + p[2] * p[2]) / 900.0).exp();
-                let base = if check { [0.78, 0.76, 0.72] } else { [0.5, 0.5, 0.52] };
+                let base = if check {
+                    [0.78, 0.76, 0.72]
+                } else {
+                    [0.5, 0.5, 0.52]
+                };
                 Some(lerp([0.62, 0.62, 0.62], base, fade))
             }
-            MAT_SPHERES => Some(lerp([0.5 + 0.5 * n[0], 0.5 + 0.5 * n[1], 0.5 + 0.5 * n[2]], [1.0, 1.0, 1.0], 0.1)),
-            MAT_LATTICE => Some(if s.hit.front_face { [0.95, 0.72, 0.3] } else { [0.55, 0.25, 0.12] }),
+            MAT_SPHERES => Some(lerp(
+                [0.5 + 0.5 * n[0], 0.5 + 0.5 * n[1], 0.5 + 0.5 * n[2]],
+                [1.0, 1.0, 1.0],
+                0.1,
+            )),
+            MAT_LATTICE => Some(if s.hit.front_face {
+                [0.95, 0.72, 0.3]
+            } else {
+                [0.55, 0.25, 0.12]
+            }),
             MAT_CORE => Some([0.95, 0.3, 0.25]),
             _ => None,
         }
@@ -265,20 +379,36 @@ struct Built {
 }
 
 /// Builds, compacts and records the structures of `scene` on `device`.
-fn build(device: &Device, scene: &DemoScene, table: &mut Table, timings: &mut Vec<(String, f64, String)>) -> Result<Built> {
+fn build(
+    device: &Device,
+    scene: &DemoScene,
+    table: &mut Table,
+    timings: &mut Vec<(String, f64, String)>,
+) -> Result<Built> {
     type F = vk::BuildAccelerationStructureFlagsKHR;
     let flags = F::PREFER_FAST_TRACE | F::ALLOW_COMPACTION | F::ALLOW_DATA_ACCESS;
     let mut blases = Vec::new();
-    let (mut build_s, mut compact_s, mut before_total, mut after_total, mut tris) = (0.0, 0.0, 0u64, 0u64, 0u64);
+    let (mut build_s, mut compact_s, mut before_total, mut after_total, mut tris) =
+        (0.0, 0.0, 0u64, 0u64, 0u64);
     for shape in &scene.shapes {
         let t = Instant::now();
         let a = match shape {
             Shape::Triangles { mesh, opaque } => {
-                let g = if *opaque { vk::GeometryFlagsKHR::OPAQUE } else { vk::GeometryFlagsKHR::empty() };
+                let g = if *opaque {
+                    vk::GeometryFlagsKHR::OPAQUE
+                } else {
+                    vk::GeometryFlagsKHR::empty()
+                };
                 ops::build_triangles(device, &mesh.positions, &mesh.indices, g, flags)
             }
             Shape::Spheres { spheres, .. } => {
-                let boxes: Vec<Aabb> = spheres.iter().map(|&(c, r)| Aabb { lo: sub(c, [r; 3]), hi: add(c, [r; 3]) }).collect();
+                let boxes: Vec<Aabb> = spheres
+                    .iter()
+                    .map(|&(c, r)| Aabb {
+                        lo: sub(c, [r; 3]),
+                        hi: add(c, [r; 3]),
+                    })
+                    .collect();
                 hostas::quick::build_aabb_blas(device, &boxes, vk::GeometryFlagsKHR::OPAQUE, flags)
             }
         }
@@ -286,7 +416,8 @@ fn build(device: &Device, scene: &DemoScene, table: &mut Table, timings: &mut Ve
         let secs = t.elapsed().as_secs_f64();
         build_s += secs;
         let t = Instant::now();
-        let (a, before, after) = ops::compact(device, a, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL)?;
+        let (a, before, after) =
+            ops::compact(device, a, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL)?;
         compact_s += t.elapsed().as_secs_f64();
         before_total += before;
         after_total += after;
@@ -294,26 +425,51 @@ fn build(device: &Device, scene: &DemoScene, table: &mut Table, timings: &mut Ve
         if matches!(shape, Shape::Triangles { .. }) {
             tris += n;
         }
-        table.row([format!("BLAS {}", shape.name()), shape.kind().into(), thousands(n), ms(secs), bytes(before), bytes(after), format!("{:.1}", after as f64 / n as f64)]);
+        table.row([
+            format!("BLAS {}", shape.name()),
+            shape.kind().into(),
+            thousands(n),
+            ms(secs),
+            bytes(before),
+            bytes(after),
+            format!("{:.1}", after as f64 / n as f64),
+        ]);
         blases.push(a);
     }
     let instances: Vec<Instance> = scene
         .instances
         .iter()
         .map(|p| {
-            let mut i = hostas::quick::instance(p.shape.map_or(AccelerationStructure::NULL, |s| blases[s]), p.transform);
+            let mut i = hostas::quick::instance(
+                p.shape.map_or(AccelerationStructure::NULL, |s| blases[s]),
+                p.transform,
+            );
             i.custom_index = p.material;
             i
         })
         .collect();
     let t = Instant::now();
-    let tlas = hostas::quick::build_tlas(device, &instances, F::PREFER_FAST_TRACE | F::ALLOW_COMPACTION).map_err(|e| anyhow!("building the top level: {e}"))?;
+    let tlas = hostas::quick::build_tlas(
+        device,
+        &instances,
+        F::PREFER_FAST_TRACE | F::ALLOW_COMPACTION,
+    )
+    .map_err(|e| anyhow!("building the top level: {e}"))?;
     let tlas_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let (tlas, before, after) = ops::compact(device, tlas, vk::AccelerationStructureTypeKHR::TOP_LEVEL)?;
+    let (tlas, before, after) =
+        ops::compact(device, tlas, vk::AccelerationStructureTypeKHR::TOP_LEVEL)?;
     compact_s += t.elapsed().as_secs_f64();
     let n = instances.len() as u64;
-    table.row(["TLAS".to_string(), "instances".into(), thousands(n), ms(tlas_s), bytes(before), bytes(after), format!("{:.1}", after as f64 / n as f64)]);
+    table.row([
+        "TLAS".to_string(),
+        "instances".into(),
+        thousands(n),
+        ms(tlas_s),
+        bytes(before),
+        bytes(after),
+        format!("{:.1}", after as f64 / n as f64),
+    ]);
     let (before_all, after_all) = (before_total + before, after_total + after);
     table.row([
         "total".to_string(),
@@ -322,14 +478,31 @@ fn build(device: &Device, scene: &DemoScene, table: &mut Table, timings: &mut Ve
         ms(build_s + tlas_s),
         bytes(before_all),
         bytes(after_all),
-        format!("-{:.0}%", 100.0 * (1.0 - after_all as f64 / before_all as f64)),
+        format!(
+            "-{:.0}%",
+            100.0 * (1.0 - after_all as f64 / before_all as f64)
+        ),
     ]);
     timings.push((
         "build".into(),
         build_s + tlas_s,
-        format!("{} BLASes ({} triangles, {:.2} Mtris/s) and a TLAS of {} instances", blases.len(), thousands(tris), tris as f64 / build_s.max(1e-9) / 1e6, n),
+        format!(
+            "{} BLASes ({} triangles, {:.2} Mtris/s) and a TLAS of {} instances",
+            blases.len(),
+            thousands(tris),
+            tris as f64 / build_s.max(1e-9) / 1e6,
+            n
+        ),
     ));
-    timings.push(("compact".into(), compact_s, format!("{} -> {} (COMPACTED_SIZE query, COMPACT copy)", bytes(before_all), bytes(after_all))));
+    timings.push((
+        "compact".into(),
+        compact_s,
+        format!(
+            "{} -> {} (COMPACTED_SIZE query, COMPACT copy)",
+            bytes(before_all),
+            bytes(after_all)
+        ),
+    ));
     Ok(Built { blases, tlas })
 }
 
@@ -344,7 +517,10 @@ fn probe_rays(camera: &Camera, w: u32, h: u32) -> Vec<Ray> {
         for x in 0..w {
             let u = (2.0 * (x as f32 + 0.5) / w as f32 - 1.0) * half * w as f32 / h as f32;
             let v = (1.0 - 2.0 * (y as f32 + 0.5) / h as f32) * half;
-            rays.push(Ray::new(camera.eye, add(fwd, add(scale(right, u), scale(up, v)))));
+            rays.push(Ray::new(
+                camera.eye,
+                add(fwd, add(scale(right, u), scale(up, v))),
+            ));
         }
     }
     rays
@@ -357,16 +533,42 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let t = Instant::now();
     let scene = scene();
     let gen_s = t.elapsed().as_secs_f64();
-    let tris: usize = scene.shapes.iter().filter(|s| matches!(s, Shape::Triangles { .. })).map(Shape::primitives).sum();
-    timings.push(("generate meshes".into(), gen_s, format!("{} shapes, {} triangles", scene.shapes.len(), thousands(tris as u64))));
+    let tris: usize = scene
+        .shapes
+        .iter()
+        .filter(|s| matches!(s, Shape::Triangles { .. }))
+        .map(Shape::primitives)
+        .sum();
+    timings.push((
+        "generate meshes".into(),
+        gen_s,
+        format!(
+            "{} shapes, {} triangles",
+            scene.shapes.len(),
+            thousands(tris as u64)
+        ),
+    ));
     let device = Device::new();
-    let mut table = Table::new(["structure", "kind", "prims", "build ms", "size", "compacted", "B/prim"]);
+    let mut table = Table::new([
+        "structure",
+        "kind",
+        "prims",
+        "build ms",
+        "size",
+        "compacted",
+        "B/prim",
+    ]);
     let built = build(&device, &scene, &mut table, &mut timings)?;
     pb.finish_and_clear();
 
     // Serialize everything, deserialize onto a second device, and compare traces.
     let pb = progress::spinner("serialization round trip");
-    let names: Vec<(String, AccelerationStructure)> = scene.shapes.iter().map(|s| s.name().to_string()).zip(built.blases.iter().copied()).collect();
+    let names: Vec<(String, AccelerationStructure)> = scene
+        .shapes
+        .iter()
+        .map(|s| s.name().to_string())
+        .zip(built.blases.iter().copied())
+        .collect();
     let t = Instant::now();
     let file = Container::from_device(&device, &names, built.tlas, None)?.to_bytes();
     let ser_s = t.elapsed().as_secs_f64();
@@ -375,26 +577,62 @@ pub fn run(a: DemoArgs) -> Result<()> {
     let (_, tlas2) = Container::parse(&file)?.load(&device2)?;
     let de_s = t.elapsed().as_secs_f64();
     let aspect = a.width as f32 / a.height as f32;
-    let camera = Camera { eye: [0.0, 4.9, 13.2], target: [0.0, 1.45, -1.8], up: [0.0, 1.0, 0.0], fov_y: if aspect >= 1.0 { 42.0 } else { 60.0 } };
+    let camera = Camera {
+        eye: [0.0, 4.9, 13.2],
+        target: [0.0, 1.45, -1.8],
+        up: [0.0, 1.0, 0.0],
+        fov_y: if aspect >= 1.0 { 42.0 } else { 60.0 },
+    };
     let probes = probe_rays(&camera, 160, 120);
     let scene1 = device.scene(built.tlas).map_err(|e| anyhow!("{e}"))?;
     let scene2 = device2.scene(tlas2).map_err(|e| anyhow!("{e}"))?;
     let same = probes
         .par_iter()
-        .map(|r| -> Result<bool> { Ok(scene1.trace_closest(r).map_err(|e| anyhow!("{e}"))? == scene2.trace_closest(r).map_err(|e| anyhow!("{e}"))?) })
+        .map(|r| -> Result<bool> {
+            Ok(scene1.trace_closest(r).map_err(|e| anyhow!("{e}"))?
+                == scene2.trace_closest(r).map_err(|e| anyhow!("{e}"))?)
+        })
         .collect::<Result<Vec<bool>>>()?
         .into_iter()
         .filter(|&s| s)
         .count();
     drop(scene2);
     pb.finish_and_clear();
-    timings.push(("serialize".into(), ser_s, format!("{} BLASes + TLAS into {}", built.blases.len(), bytes(file.len() as u64))));
-    timings.push(("deserialize".into(), de_s, format!("onto a second device; {}/{} probe rays hit identically", thousands(same as u64), thousands(probes.len() as u64))));
-    ensure!(same == probes.len(), "the deserialized scene traces differently from the original ({} of {} rays differ)", probes.len() - same, probes.len());
+    timings.push((
+        "serialize".into(),
+        ser_s,
+        format!(
+            "{} BLASes + TLAS into {}",
+            built.blases.len(),
+            bytes(file.len() as u64)
+        ),
+    ));
+    timings.push((
+        "deserialize".into(),
+        de_s,
+        format!(
+            "onto a second device; {}/{} probe rays hit identically",
+            thousands(same as u64),
+            thousands(probes.len() as u64)
+        ),
+    ));
+    ensure!(
+        same == probes.len(),
+        "the deserialized scene traces differently from the original ({} of {} rays differ)",
+        probes.len() - same,
+        probes.len()
+    );
 
     // Render.
-    let instance_shape = scene.instances.iter().map(|p| p.shape.unwrap_or(usize::MAX)).collect();
-    let programs = DemoPrograms { shapes: &scene.shapes, instance_shape };
+    let instance_shape = scene
+        .instances
+        .iter()
+        .map(|p| p.shape.unwrap_or(usize::MAX))
+        .collect();
+    let programs = DemoPrograms {
+        shapes: &scene.shapes,
+        instance_shape,
+    };
     let look = Look {
         sun: normalize([-0.45, 0.8, 0.55]),
         shadows: true,
@@ -405,7 +643,15 @@ pub fn run(a: DemoArgs) -> Result<()> {
         up: [0.0, 1.0, 0.0],
     };
     let pb = progress::bar(a.height as u64, "rendering");
-    let (image, stats): (_, RenderStats) = render(&scene1, &camera, a.width, a.height, &programs, &look, &|| pb.inc(1))?;
+    let (image, stats): (_, RenderStats) = render(
+        &scene1,
+        &camera,
+        a.width,
+        a.height,
+        &programs,
+        &look,
+        &|| pb.inc(1),
+    )?;
     pb.finish_and_clear();
     timings.push((
         "trace".into(),
@@ -423,10 +669,18 @@ pub fn run(a: DemoArgs) -> Result<()> {
     ));
     let t = Instant::now();
     image.save_png(&a.output)?;
-    timings.push(("write PNG".into(), t.elapsed().as_secs_f64(), a.output.display().to_string()));
+    timings.push((
+        "write PNG".into(),
+        t.elapsed().as_secs_f64(),
+        a.output.display().to_string(),
+    ));
 
     let inactive = scene.instances.iter().filter(|p| p.shape.is_none()).count();
-    let mirrored = scene.instances.iter().filter(|p| p.transform.determinant() < 0.0).count();
+    let mirrored = scene
+        .instances
+        .iter()
+        .filter(|p| p.transform.determinant() < 0.0)
+        .count();
     let mut out = format!(
         "hostas demo: {} bottom-level structures, {} instances ({} inactive, {} mirrored), {} threads\n\n",
         scene.shapes.len(),

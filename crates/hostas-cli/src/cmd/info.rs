@@ -6,9 +6,9 @@ use crate::container::{self, Container};
 use crate::report::{build_flag_names, bytes, thousands, uuid};
 use anyhow::{Context, Result, anyhow};
 use clap::Args;
+use hostas::Device;
 use hostas::commands::SerializedHeader;
 use hostas::device::{COMPATIBILITY_UUID, DRIVER_UUID};
-use hostas::Device;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -99,10 +99,15 @@ fn prim_kind_name(k: hostas::layout::PrimKind) -> &'static str {
 
 /// Describes one serialized structure.
 pub fn describe(device: &Device, role: String, name: String, data: &[u8]) -> Result<StructureInfo> {
-    let h = SerializedHeader::parse(data).map_err(|e| anyhow!("{role}: not a serialized acceleration structure: {e}"))?;
+    let h = SerializedHeader::parse(data)
+        .map_err(|e| anyhow!("{role}: not a serialized acceleration structure: {e}"))?;
     let mut notes = Vec::new();
     if h.serialized_size != data.len() as u64 {
-        notes.push(format!("serializedSize says {} bytes, {} are present", h.serialized_size, data.len()));
+        notes.push(format!(
+            "serializedSize says {} bytes, {} are present",
+            h.serialized_size,
+            data.len()
+        ));
     }
     if h.handle_count >> 32 != 0 {
         notes.push("the handle count's high half is set: a block-based (opacity micromap) header, no plain handle list".into());
@@ -110,7 +115,9 @@ pub fn describe(device: &Device, role: String, name: String, data: &[u8]) -> Res
     let ours = h.driver_uuid == DRIVER_UUID;
     let compatible = ours && h.compatibility_uuid == COMPATIBILITY_UUID;
     let start = 56 + 8 * h.handles.len();
-    let hostas_payload = data.get(start..).is_some_and(hostas::commands::copy::is_hostas_structure);
+    let hostas_payload = data
+        .get(start..)
+        .is_some_and(hostas::commands::copy::is_hostas_structure);
     let implementation = if compatible {
         "hostas"
     } else if ours || hostas_payload {
@@ -124,7 +131,11 @@ pub fn describe(device: &Device, role: String, name: String, data: &[u8]) -> Res
             Ok(a) => {
                 let s = device.statistics(a).map_err(|e| anyhow!("{role}: {e}"))?;
                 statistics = Some(Stats {
-                    ty: if s.top_level { "top-level" } else { "bottom-level" },
+                    ty: if s.top_level {
+                        "top-level"
+                    } else {
+                        "bottom-level"
+                    },
                     primitive_kind: prim_kind_name(s.prim_kind),
                     build_flags: build_flag_names(s.build_flags),
                     preset: s.preset,
@@ -143,7 +154,10 @@ pub fn describe(device: &Device, role: String, name: String, data: &[u8]) -> Res
             Err(e) => notes.push(format!("the payload does not deserialize: {e}")),
         }
     } else if implementation == "hostas-other-version" {
-        notes.push("serialized by another hostas version or layout: statistics need the same version".into());
+        notes.push(
+            "serialized by another hostas version or layout: statistics need the same version"
+                .into(),
+        );
     } else {
         notes.push("serialized by another implementation: its payload is opaque to hostas".into());
     }
@@ -174,14 +188,37 @@ pub fn inspect(path: &std::path::Path) -> Result<FileInfo> {
         let c = Container::parse(&data).with_context(|| file.clone())?;
         let mut structures = Vec::new();
         for (i, b) in c.blases.iter().enumerate() {
-            structures.push(describe(&device, format!("bottom level {i}"), b.name.clone(), &b.data).with_context(|| file.clone())?);
+            structures.push(
+                describe(
+                    &device,
+                    format!("bottom level {i}"),
+                    b.name.clone(),
+                    &b.data,
+                )
+                .with_context(|| file.clone())?,
+            );
         }
-        structures.push(describe(&device, "top level".into(), String::new(), &c.tlas.data).with_context(|| file.clone())?);
-        return Ok(FileInfo { file, format: "hostas-build", bytes: data.len() as u64, bounds: c.bounds.map(|(l, h)| [l, h]), structures });
+        structures.push(
+            describe(&device, "top level".into(), String::new(), &c.tlas.data)
+                .with_context(|| file.clone())?,
+        );
+        return Ok(FileInfo {
+            file,
+            format: "hostas-build",
+            bytes: data.len() as u64,
+            bounds: c.bounds.map(|(l, h)| [l, h]),
+            structures,
+        });
     }
     let not_one = |why: String| {
-        let mesh_hint = if crate::mesh::is_mesh_path(path) { "; it looks like a mesh: `hostas build` makes a structure of it" } else { "" };
-        anyhow!("{file}: not a hostas build file or serialized acceleration structure ({why}){mesh_hint}")
+        let mesh_hint = if crate::mesh::is_mesh_path(path) {
+            "; it looks like a mesh: `hostas build` makes a structure of it"
+        } else {
+            ""
+        };
+        anyhow!(
+            "{file}: not a hostas build file or serialized acceleration structure ({why}){mesh_hint}"
+        )
     };
     // Plausibility: any implementation's data starts with its total size and handle list.
     let h = SerializedHeader::parse(&data).map_err(|e| not_one(e.to_string()))?;
@@ -191,26 +228,48 @@ pub fn inspect(path: &std::path::Path) -> Result<FileInfo> {
             "its header gives serializedSize {} for a file of {} bytes{}",
             h.serialized_size,
             data.len(),
-            if h.serialized_size > data.len() as u64 { ": truncated?" } else { "" }
+            if h.serialized_size > data.len() as u64 {
+                ": truncated?"
+            } else {
+                ""
+            }
         )));
     }
-    let s = describe(&device, "structure".into(), String::new(), &data).map_err(|e| not_one(e.to_string()))?;
-    Ok(FileInfo { file, format: "serialized", bytes: data.len() as u64, bounds: None, structures: vec![s] })
+    let s = describe(&device, "structure".into(), String::new(), &data)
+        .map_err(|e| not_one(e.to_string()))?;
+    Ok(FileInfo {
+        file,
+        format: "serialized",
+        bytes: data.len() as u64,
+        bounds: None,
+        structures: vec![s],
+    })
 }
 
 fn text(info: &FileInfo) -> String {
     let mut s = String::new();
     let what = match info.format {
-        "hostas-build" => format!("hostas build file, {} bottom level(s) and a top level", info.structures.len().saturating_sub(1)),
+        "hostas-build" => format!(
+            "hostas build file, {} bottom level(s) and a top level",
+            info.structures.len().saturating_sub(1)
+        ),
         _ => "serialized acceleration structure".to_string(),
     };
     let _ = writeln!(s, "{}: {what}, {}", info.file, bytes(info.bytes));
     if let Some([lo, hi]) = info.bounds {
-        let _ = writeln!(s, "  bounds: ({}, {}, {}) .. ({}, {}, {})", lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]);
+        let _ = writeln!(
+            s,
+            "  bounds: ({}, {}, {}) .. ({}, {}, {})",
+            lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+        );
     }
     for st in &info.structures {
         let _ = writeln!(s);
-        let name = if st.name.is_empty() { String::new() } else { format!(" \"{}\"", st.name) };
+        let name = if st.name.is_empty() {
+            String::new()
+        } else {
+            format!(" \"{}\"", st.name)
+        };
         let _ = writeln!(s, "{}{name}:", st.role);
         let h = &st.header;
         let who = match st.implementation {
@@ -222,25 +281,94 @@ fn text(info: &FileInfo) -> String {
             let _ = writeln!(s, "  {k:<20} {v}");
         };
         row(&mut s, "driverUUID", format!("{}  ({who})", h.driver_uuid));
-        row(&mut s, "compatibility UUID", format!("{}  ({})", h.compatibility_uuid, if st.compatible { "compatible" } else { "incompatible with this hostas" }));
-        row(&mut s, "serialized size", format!("{} bytes", thousands(h.serialized_size)));
-        row(&mut s, "deserialized size", format!("{} bytes", thousands(h.deserialized_size)));
-        let mut handles: Vec<String> = h.handles.iter().take(8).map(|v| format!("{v:#x}")).collect();
+        row(
+            &mut s,
+            "compatibility UUID",
+            format!(
+                "{}  ({})",
+                h.compatibility_uuid,
+                if st.compatible {
+                    "compatible"
+                } else {
+                    "incompatible with this hostas"
+                }
+            ),
+        );
+        row(
+            &mut s,
+            "serialized size",
+            format!("{} bytes", thousands(h.serialized_size)),
+        );
+        row(
+            &mut s,
+            "deserialized size",
+            format!("{} bytes", thousands(h.deserialized_size)),
+        );
+        let mut handles: Vec<String> = h
+            .handles
+            .iter()
+            .take(8)
+            .map(|v| format!("{v:#x}"))
+            .collect();
         if h.handles.len() > 8 {
             handles.push(format!("... ({} more)", h.handles.len() - 8));
         }
-        let legend = if info.format == "hostas-build" && st.role == "top level" { "  (i+1 = bottom level i of this file, 0 = inactive)" } else { "" };
-        row(&mut s, "handles", if handles.is_empty() { format!("{}", h.handle_count) } else { format!("{}: {}{legend}", h.handle_count, handles.join(", ")) });
+        let legend = if info.format == "hostas-build" && st.role == "top level" {
+            "  (i+1 = bottom level i of this file, 0 = inactive)"
+        } else {
+            ""
+        };
+        row(
+            &mut s,
+            "handles",
+            if handles.is_empty() {
+                format!("{}", h.handle_count)
+            } else {
+                format!("{}: {}{legend}", h.handle_count, handles.join(", "))
+            },
+        );
         if let Some(t) = &st.statistics {
             row(&mut s, "type", format!("{}, {}", t.ty, t.primitive_kind));
-            row(&mut s, "build flags", if t.build_flags.is_empty() { "none".into() } else { t.build_flags.join(" | ") });
+            row(
+                &mut s,
+                "build flags",
+                if t.build_flags.is_empty() {
+                    "none".into()
+                } else {
+                    t.build_flags.join(" | ")
+                },
+            );
             row(&mut s, "preset", t.preset.to_string());
             row(&mut s, "geometries", thousands(t.geometries as u64));
-            row(&mut s, "primitives", format!("{} ({} active)", thousands(t.primitives as u64), thousands(t.active_primitives as u64)));
-            row(&mut s, "nodes", format!("{} (4-wide), {} leaves", thousands(t.nodes as u64), thousands(t.leaves as u64)));
+            row(
+                &mut s,
+                "primitives",
+                format!(
+                    "{} ({} active)",
+                    thousands(t.primitives as u64),
+                    thousands(t.active_primitives as u64)
+                ),
+            );
+            row(
+                &mut s,
+                "nodes",
+                format!(
+                    "{} (4-wide), {} leaves",
+                    thousands(t.nodes as u64),
+                    thousands(t.leaves as u64)
+                ),
+            );
             row(&mut s, "depth", t.depth.to_string());
             row(&mut s, "SAH cost", format!("{:.2}", t.sah_cost));
-            row(&mut s, "size", format!("{} ({:.1} bytes per primitive)", bytes(t.bytes), t.bytes_per_primitive));
+            row(
+                &mut s,
+                "size",
+                format!(
+                    "{} ({:.1} bytes per primitive)",
+                    bytes(t.bytes),
+                    t.bytes_per_primitive
+                ),
+            );
         }
         for n in &st.notes {
             row(&mut s, "note", n.clone());

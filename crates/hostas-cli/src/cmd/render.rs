@@ -63,9 +63,16 @@ pub struct RenderArgs {
 }
 
 pub fn run(a: RenderArgs) -> Result<()> {
-    ensure!(a.fov > 0.0 && a.fov < 180.0, "--fov must be between 0 and 180 degrees, got {}", a.fov);
+    ensure!(
+        a.fov > 0.0 && a.fov < 180.0,
+        "--fov must be between 0 and 180 degrees, got {}",
+        a.fov
+    );
     ensure!(length(a.up) > 0.0, "--up must not be the zero vector");
-    let loaded = input::load(&a.input, vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE)?;
+    let loaded = input::load(
+        &a.input,
+        vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+    )?;
     let aspect = a.width as f32 / a.height as f32;
     let (lo, hi) = loaded.bounds.unwrap_or(([-1.0; 3], [1.0; 3]));
     if loaded.bounds.is_none() && a.eye.is_none() {
@@ -84,7 +91,10 @@ pub fn run(a: RenderArgs) -> Result<()> {
     let right = normalize(cross(view, a.up));
     let sun = match a.sun {
         Some(s) => normalize(s),
-        None => normalize(add(add(normalize(a.up), scale(view, -0.5)), scale(right, -0.6))),
+        None => normalize(add(
+            add(normalize(a.up), scale(view, -0.5)),
+            scale(right, -0.6),
+        )),
     };
     ensure!(length(sun) > 0.0, "--sun must not be the zero vector");
     let look = Look {
@@ -96,9 +106,20 @@ pub fn run(a: RenderArgs) -> Result<()> {
         scene_radius: 0.5 * length(sub(hi, lo)),
         up: normalize(a.up),
     };
-    let scene = loaded.device.scene(loaded.tlas).map_err(|e| anyhow!("{}: {e}", a.input.display()))?;
+    let scene = loaded
+        .device
+        .scene(loaded.tlas)
+        .map_err(|e| anyhow!("{}: {e}", a.input.display()))?;
     let pb = progress::bar(a.height as u64, "rendering");
-    let (image, stats) = render(&scene, &camera, a.width, a.height, &NoPrograms, &look, &|| pb.inc(1))?;
+    let (image, stats) = render(
+        &scene,
+        &camera,
+        a.width,
+        a.height,
+        &NoPrograms,
+        &look,
+        &|| pb.inc(1),
+    )?;
     pb.finish_and_clear();
     image.save_png(&a.output)?;
     note!(

@@ -48,10 +48,17 @@ pub struct TraceArgs {
 }
 
 pub fn run(a: TraceArgs) -> Result<()> {
-    let data = std::fs::read(&a.rays).with_context(|| format!("{}: cannot read", a.rays.display()))?;
+    let data =
+        std::fs::read(&a.rays).with_context(|| format!("{}: cannot read", a.rays.display()))?;
     let rays = records::decode_rays(&data).with_context(|| format!("{}", a.rays.display()))?;
-    let loaded = input::load(&a.input, vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE)?;
-    let scene = loaded.device.scene(loaded.tlas).map_err(|e| anyhow!("{}: {e}", a.input.display()))?;
+    let loaded = input::load(
+        &a.input,
+        vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+    )?;
+    let scene = loaded
+        .device
+        .scene(loaded.tlas)
+        .map_err(|e| anyhow!("{}: {e}", a.input.display()))?;
     const CHUNK: usize = 4096;
     let pb = progress::bar(rays.len() as u64, "tracing");
     let t = Instant::now();
@@ -61,8 +68,12 @@ pub fn run(a: TraceArgs) -> Result<()> {
         .map(|(c, chunk)| {
             let mut out = Vec::with_capacity(chunk.len() * HIT_SIZE);
             for (k, ray) in chunk.iter().enumerate() {
-                let hit: Hit = if a.any_hit { scene.trace_any(ray) } else { scene.trace_closest(ray) }
-                    .map_err(|e| anyhow!("{}: ray {}: {e}", a.rays.display(), c * CHUNK + k))?;
+                let hit: Hit = if a.any_hit {
+                    scene.trace_any(ray)
+                } else {
+                    scene.trace_closest(ray)
+                }
+                .map_err(|e| anyhow!("{}: ray {}: {e}", a.rays.display(), c * CHUNK + k))?;
                 out.extend_from_slice(&records::encode_hit(&hit));
             }
             pb.inc(chunk.len() as u64);
@@ -76,7 +87,10 @@ pub fn run(a: TraceArgs) -> Result<()> {
         out.extend_from_slice(&r?);
     }
     write_file(&a.hits, &out)?;
-    let hits = out.chunks_exact(HIT_SIZE).filter(|h| h[24..28] != [0; 4]).count();
+    let hits = out
+        .chunks_exact(HIT_SIZE)
+        .filter(|h| h[24..28] != [0; 4])
+        .count();
     note!(
         "traced {} rays ({} hits) in {:.1} ms: {:.2} Mrays/s on {} threads",
         rays.len(),
