@@ -26,6 +26,9 @@ pub struct Statistics {
     pub used_bytes: u64,
     /// Bytes of the memory range it was created with.
     pub allocated_bytes: u64,
+    /// Bounds of everything stored (world space for a top-level structure, object space for
+    /// a bottom-level one).
+    pub bounds: crate::math::Aabb,
 }
 
 impl Statistics {
@@ -46,6 +49,7 @@ impl Statistics {
             sah_cost: h.sah_cost,
             used_bytes: h.used_size,
             allocated_bytes: h.allocated_size,
+            bounds: h.bounds,
         }
     }
 

@@ -85,7 +85,7 @@ fn check_closest(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk:
 /// An any-hit that rejects everything and an intersection that reports only opaque boxes:
 /// the committed hit is the closest opaque candidate, so opacity resolution is observed.
 fn check_opaque_only(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk::BuildAccelerationStructureFlagsKHR) -> Result<(), TestCaseError> {
-    let hit = scene.trace_with(ray, |_| false, |c| c.opaque.then_some(c.t)).map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let hit = scene.trace_with(ray, |_| false, |q| q.candidate().opaque.then_some(q.candidate().t)).map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let cands: Vec<_> = oracle.candidates(ray, 0.0).into_iter().filter(|c| c.opaque).collect();
     let near: Vec<_> = oracle.candidates(ray, AABB_EPS).into_iter().filter(|c| c.opaque).collect();
     let best = cands.iter().map(|c| c.t).fold(f64::INFINITY, f64::min);

@@ -291,8 +291,10 @@ impl Device {
         Ok(bytes[..n as usize].to_vec())
     }
 
-    /// Deserializes `bytes` (any alignment) into a new structure of the serialized type, with
-    /// the instance references given (one per instance) or those in the data.
+    /// Deserializes `bytes` (any alignment) into a new `GENERIC` structure that takes the
+    /// serialized type. A top-level structure's instances reference the handles in the data's
+    /// handle list (one per instance, in instance order): rewrite that list first with the
+    /// handles of the bottom-level structures deserialized for it.
     pub fn deserialize(&self, bytes: &[u8]) -> Result<AccelerationStructure> {
         let header = SerializedHeader::parse(bytes)?;
         let mut words = vec![0u128; bytes.len().div_ceil(16)];

@@ -160,7 +160,7 @@ impl Scene {
     /// is bound: non-opaque triangles are accepted, AABBs report a hit where the ray enters
     /// the box.
     pub fn trace_closest(&self, ray: &Ray) -> Result<Hit> {
-        self.trace_with(ray, |_| true, |c| Some(c.t))
+        self.trace_with(ray, |_| true, |q| Some(q.candidate().t))
     }
 
     /// Like [`Scene::trace_closest`] but stops at the first accepted hit
@@ -171,26 +171,27 @@ impl Scene {
         self.trace_closest(&r)
     }
 
-    /// Closest hit with callbacks: `any_hit` decides on non-opaque triangle candidates
-    /// (return `true` to accept), `intersect` on AABB candidates (return the hit distance, or
-    /// `None`; distances outside `[tMin, current closest]` are ignored).
+    /// Closest hit with callbacks, like an any-hit and an intersection shader: `any_hit`
+    /// decides on non-opaque triangle candidates (return `true` to accept), `intersect` on AABB
+    /// candidates (return the hit distance, or `None`; distances outside `[tMin, current
+    /// closest]` are ignored). Both get the query, so every candidate getter (object-space
+    /// ray, transforms, ids, vertex positions) is available to them.
     pub fn trace_with(
         &self,
         ray: &Ray,
-        mut any_hit: impl FnMut(&super::Intersection) -> bool,
-        mut intersect: impl FnMut(&super::Intersection) -> Option<f32>,
+        mut any_hit: impl FnMut(&RayQuery) -> bool,
+        mut intersect: impl FnMut(&RayQuery) -> Option<f32>,
     ) -> Result<Hit> {
         let mut q = RayQuery::new(self, ray)?;
         while q.proceed() {
-            let c = *q.candidate();
-            match c.candidate_type() {
+            match q.candidate_type() {
                 Some(super::CandidateType::Triangle) => {
-                    if any_hit(&c) {
+                    if any_hit(&q) {
                         q.confirm_intersection()?;
                     }
                 }
                 Some(super::CandidateType::Aabb) => {
-                    if let Some(t) = intersect(&c) {
+                    if let Some(t) = intersect(&q) {
                         // Outside the allowed range the hit is dropped, as a shader's would be.
                         let _ = q.generate_intersection(t);
                     }
