@@ -38,4 +38,4 @@ pub use input::{AabbsData, BuildGeometryInfo, BuildRangeInfo, Geometry, Geometry
 pub use input::instances::Instance;
 pub use math::{Aabb, Affine};
 pub use memory::Buffer;
-pub use traverse::{CandidateType, CommittedType, Hit, HitKind, Intersection, Ray, RayFlags, RayQuery, Scene};
+pub use traverse::{CandidateType, CommittedType, Hit, HitKind, Intersection, Ray, RayFlags, RayQuery, Scene, Tracer};

@@ -47,6 +47,9 @@ fn check_scene(seed: u64, desc: &SceneDesc, rays: usize, r: &mut Rand) -> Result
 
 fn check_closest(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk::BuildAccelerationStructureFlagsKHR) -> Result<(), TestCaseError> {
     let hit = scene.trace_closest(ray).map_err(|e| TestCaseError::fail(format!("trace: {e}")))?;
+    // The batch tracer and the ray-query state machine (accepting everything) agree exactly.
+    let via_query = scene.trace_with(ray, |_| true, |q| Some(q.candidate().t)).map_err(|e| TestCaseError::fail(format!("query: {e}")))?;
+    prop_assert_eq!(hit, via_query, "tracer and ray query differ for {:?}", ray);
     let expected = oracle.closest(ray);
     match (hit.kind, expected) {
         (HitKind::Miss, None) => {}

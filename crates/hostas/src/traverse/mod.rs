@@ -7,10 +7,12 @@
 
 mod query;
 mod scene;
+mod tracer;
 pub mod triangle;
 
 pub use query::{CandidateType, CommittedType, Intersection, RayQuery};
 pub use scene::{Hit, HitKind, Scene};
+pub use tracer::Tracer;
 
 use crate::error::{Error, Location, Result};
 use crate::math::Vec3;

@@ -97,10 +97,10 @@ impl Intersection {
 const STACK_CAPACITY: usize = 3 * MAX_DEPTH as usize + 4;
 
 #[derive(Clone, Copy, Default)]
-struct Entry {
-    child: u32,
-    count: u32,
-    t: f32,
+pub(super) struct Entry {
+    pub child: u32,
+    pub count: u32,
+    pub t: f32,
 }
 
 struct Stack {
@@ -147,10 +147,10 @@ impl Stack {
 
 /// 1 + 2 * gamma(3): widens the slab test's far distance so that rounding never loses a hit
 /// (Ize, "Robust BVH Ray Traversal", JCGT 2013).
-const ROBUST_FAR: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(super) const ROBUST_FAR: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 #[derive(Clone, Copy)]
-struct BoxRay {
+pub(super) struct BoxRay {
     origin: Vec3,
     inv: Vec3,
     /// Per axis: the ray goes towards smaller values, so a box's near plane is its max.
@@ -158,7 +158,7 @@ struct BoxRay {
 }
 
 impl BoxRay {
-    fn new(origin: Vec3, dir: Vec3) -> BoxRay {
+    pub(super) fn new(origin: Vec3, dir: Vec3) -> BoxRay {
         // A zero component gives a huge finite inverse, not infinity, so that a ray lying in a
         // slab's plane computes 0 * x = 0 instead of 0 * inf = NaN.
         let inv = dir.map(|d| if d == 0.0 { f32::MAX.copysign(d) } else { 1.0 / d });
@@ -168,7 +168,7 @@ impl BoxRay {
     /// Entry distances of the four children of `node`; `f32::INFINITY` where the segment
     /// `[t_min, t_max]` misses (inclusive at both ends).
     #[inline(always)]
-    fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; 4] {
+    pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; 4] {
         let (nx, fx) = if self.neg[0] { (&n.hi_x, &n.lo_x) } else { (&n.lo_x, &n.hi_x) };
         let (ny, fy) = if self.neg[1] { (&n.hi_y, &n.lo_y) } else { (&n.lo_y, &n.hi_y) };
         let (nz, fz) = if self.neg[2] { (&n.hi_z, &n.lo_z) } else { (&n.lo_z, &n.hi_z) };
@@ -184,7 +184,7 @@ impl BoxRay {
     }
 
     #[inline(always)]
-    fn aabb(&self, b: &[f32; 6], t_min: f32, t_max: f32) -> Option<f32> {
+    pub(super) fn aabb(&self, b: &[f32; 6], t_min: f32, t_max: f32) -> Option<f32> {
         let mut near = t_min;
         let mut far = f32::INFINITY;
         for k in 0..3 {
@@ -511,7 +511,7 @@ impl<'s> RayQuery<'s> {
 
 /// Opacity in the spec's order: geometry flag, then instance force flags, then ray flags.
 #[inline(always)]
-fn resolve_opacity(view: &View, geometry: u32, instance: &InstanceRecord, ray: RayFlags) -> bool {
+pub(super) fn resolve_opacity(view: &View, geometry: u32, instance: &InstanceRecord, ray: RayFlags) -> bool {
     let mut opaque = if view.header.header_flags & HEADER_ALL_OPAQUE != 0 {
         true
     } else if view.header.header_flags & HEADER_NONE_OPAQUE != 0 {
@@ -534,7 +534,7 @@ fn resolve_opacity(view: &View, geometry: u32, instance: &InstanceRecord, ray: R
 }
 
 #[inline(always)]
-fn opacity_culled(opaque: bool, ray: RayFlags) -> bool {
+pub(super) fn opacity_culled(opaque: bool, ray: RayFlags) -> bool {
     (opaque && ray.contains(RayFlags::CULL_OPAQUE)) || (!opaque && ray.contains(RayFlags::CULL_NO_OPAQUE))
 }
 

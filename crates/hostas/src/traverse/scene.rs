@@ -4,7 +4,7 @@
 //! is traced as it is now.
 
 use super::query::{CommittedType, RayQuery};
-use super::{Ray, RayFlags};
+use super::Ray;
 use crate::device::{AccelerationStructure, Device};
 use crate::error::{Error, Result};
 use crate::layout::view::{Parts, View};
@@ -145,6 +145,21 @@ impl Scene {
         View::from_parts(self.bytes(r), &r.parts)
     }
 
+    /// Index of the bottom-level structure behind stored instance `slot`.
+    pub(crate) fn instance_blas_index(&self, instance_slot: u32) -> Option<u32> {
+        self.instance_blas.get(instance_slot as usize).copied().filter(|&b| b != u32::MAX)
+    }
+
+    pub(crate) fn blas_view(&self, index: u32) -> Option<View<'_>> {
+        let r = self.blases.get(index as usize)?;
+        View::from_parts(self.bytes(r), &r.parts)
+    }
+
+    /// A tracer for many rays (reuses its views and stack).
+    pub fn tracer(&self) -> super::Tracer<'_> {
+        super::Tracer::new(self)
+    }
+
     pub(crate) fn blas_view_for(&self, instance_slot: u32) -> Option<View<'_>> {
         let b = *self.instance_blas.get(instance_slot as usize)?;
         let r = self.blases.get(b as usize)?;
@@ -160,15 +175,13 @@ impl Scene {
     /// is bound: non-opaque triangles are accepted, AABBs report a hit where the ray enters
     /// the box.
     pub fn trace_closest(&self, ray: &Ray) -> Result<Hit> {
-        self.trace_with(ray, |_| true, |q| Some(q.candidate().t))
+        self.tracer().closest(ray)
     }
 
     /// Like [`Scene::trace_closest`] but stops at the first accepted hit
     /// (`TerminateOnFirstHit`).
     pub fn trace_any(&self, ray: &Ray) -> Result<Hit> {
-        let mut r = *ray;
-        r.flags = r.flags | RayFlags::TERMINATE_ON_FIRST_HIT;
-        self.trace_closest(&r)
+        self.tracer().any(ray)
     }
 
     /// Closest hit with callbacks, like an any-hit and an intersection shader: `any_hit`
@@ -219,7 +232,7 @@ impl Scene {
     /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order.
     pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
         use rayon::prelude::*;
-        rays.par_iter().with_min_len(256).map(|r| if any_hit { self.trace_any(r) } else { self.trace_closest(r) }).collect()
+        rays.par_iter().with_min_len(256).map_init(|| self.tracer(), |t, r| if any_hit { t.any(r) } else { t.closest(r) }).collect()
     }
 
     /// Primitive kind of the BLAS behind stored instance `slot`, for statistics and tools.

@@ -1,0 +1,239 @@
+//! Batch tracing without the ray-query state machine: closest hit and any hit with the
+//! semantics of `traceRayEXT` when no any-hit or intersection shader is bound (every
+//! candidate that survives culling is accepted; an AABB is hit where the ray enters it).
+//!
+//! This is the hot path of rendering and benchmarks, so it keeps per-ray work to the
+//! traversal itself: the views are made once per tracer, the stack is reused across rays,
+//! candidates are not materialized, and the ids of the hit are looked up once at the end.
+//! The oracle tests check it against the brute-force tracer just like `RayQuery`.
+
+use super::query::{BoxRay, Entry, opacity_culled, resolve_opacity};
+use super::scene::{Hit, HitKind, Scene};
+use super::triangle::ShearedRay;
+use super::{Ray, RayFlags};
+use crate::error::Result;
+use crate::layout::view::View;
+use crate::layout::{EMPTY_CHILD, InstanceRecord, LEAF_BIT, PrimKind};
+use crate::math::Affine;
+use ash::vk;
+
+thread_local! {
+    static STACKS: std::cell::RefCell<Vec<Vec<Entry>>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Traces many rays through one [`Scene`], reusing its views and stack.
+pub struct Tracer<'s> {
+    scene: &'s Scene,
+    tlas: Option<View<'s>>,
+    /// The bottom-level view used last (consecutive instances often share one).
+    cached: Option<(u32, View<'s>)>,
+    stack: Vec<Entry>,
+}
+
+impl Drop for Tracer<'_> {
+    fn drop(&mut self) {
+        let s = std::mem::take(&mut self.stack);
+        STACKS.with(|p| {
+            let mut p = p.borrow_mut();
+            if p.len() < 8 {
+                p.push(s);
+            }
+        });
+    }
+}
+
+/// The hit found so far.
+#[derive(Clone, Copy)]
+struct Best {
+    t: f32,
+    kind: HitKind,
+    instance_slot: u32,
+    blas: u32,
+    prim_slot: u32,
+    barycentrics: [f32; 2],
+    front_face: bool,
+}
+
+impl<'s> Tracer<'s> {
+    pub fn new(scene: &'s Scene) -> Tracer<'s> {
+        let mut stack = STACKS.with(|p| p.borrow_mut().pop()).unwrap_or_default();
+        stack.clear();
+        Tracer { scene, tlas: scene.tlas_view(), cached: None, stack }
+    }
+
+    /// Closest hit (see [`Scene::trace_closest`]).
+    pub fn closest(&mut self, ray: &Ray) -> Result<Hit> {
+        self.trace(ray, ray.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT))
+    }
+
+    /// First accepted hit (see [`Scene::trace_any`]).
+    pub fn any(&mut self, ray: &Ray) -> Result<Hit> {
+        self.trace(ray, true)
+    }
+
+    fn blas(&mut self, index: u32) -> Option<View<'s>> {
+        if let Some((i, v)) = self.cached {
+            if i == index {
+                return Some(v);
+            }
+        }
+        let v = self.scene.blas_view(index)?;
+        self.cached = Some((index, v));
+        Some(v)
+    }
+
+    fn trace(&mut self, ray: &Ray, first_hit: bool) -> Result<Hit> {
+        ray.validate()?;
+        let Some(tlas) = self.tlas else { return Ok(Hit::MISS) };
+        if tlas.nodes.is_empty() {
+            return Ok(Hit::MISS);
+        }
+        let flags = ray.flags;
+        let mut best = Best { t: ray.t_max, kind: HitKind::Miss, instance_slot: 0, blas: 0, prim_slot: 0, barycentrics: [0.0; 2], front_face: false };
+        let world = BoxRay::new(ray.origin, ray.direction);
+        let mut stack = std::mem::take(&mut self.stack);
+        stack.clear();
+        stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
+        'top: while let Some(e) = stack.pop() {
+            if e.t > best.t {
+                continue;
+            }
+            if e.child & LEAF_BIT == 0 {
+                push_children(&mut stack, &tlas.nodes, e.child, &world, ray.t_min, best.t);
+                continue;
+            }
+            let first = e.child & !LEAF_BIT;
+            for slot in first..first + e.count {
+                let Some(inst) = tlas.instances.get(slot as usize) else { continue };
+                if inst.mask & ray.cull_mask & 0xff == 0 {
+                    continue;
+                }
+                let Some(bi) = self.scene.instance_blas_index(slot) else { continue };
+                let Some(view) = self.blas(bi) else { continue };
+                let skip = match view.prim_kind {
+                    PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
+                    PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
+                    _ => true,
+                };
+                if skip || view.nodes.is_empty() {
+                    continue;
+                }
+                let w2o = Affine::from_rows(inst.world_to_object);
+                let found = trace_blas(&mut stack, &view, inst, slot, bi, &w2o, ray, &mut best, first_hit);
+                if found && first_hit {
+                    break 'top;
+                }
+            }
+        }
+        self.stack = stack;
+        if best.kind == HitKind::Miss {
+            return Ok(Hit::MISS);
+        }
+        let inst = &tlas.instances[best.instance_slot as usize];
+        let view = self.blas(best.blas);
+        let id = view.and_then(|v| v.prim_ids.get(best.prim_slot as usize).copied()).unwrap_or(0);
+        let (geometry_index, primitive_index) = view.map_or((0, 0), |v| v.locate(id));
+        Ok(Hit {
+            kind: best.kind,
+            t: best.t,
+            instance_id: inst.instance_id,
+            instance_custom_index: inst.custom_index,
+            geometry_index,
+            primitive_index,
+            barycentrics: best.barycentrics,
+            front_face: best.front_face,
+        })
+    }
+}
+
+/// Tests the children of node `index` and pushes those the segment reaches, nearest last.
+#[inline(always)]
+fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u32, ray: &BoxRay, t_min: f32, t_max: f32) {
+    let Some(node) = nodes.get(index as usize) else { return };
+    let t = ray.node(node, t_min, t_max);
+    let mut hits = [Entry::default(); 4];
+    let mut n = 0;
+    for k in 0..4 {
+        if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
+            let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };
+            let mut j = n;
+            while j > 0 && hits[j - 1].t < e.t {
+                hits[j] = hits[j - 1];
+                j -= 1;
+            }
+            hits[j] = e;
+            n += 1;
+        }
+    }
+    stack.extend_from_slice(&hits[..n]);
+}
+
+/// Traverses one instance's bottom-level structure on top of `stack`, updating `best`.
+/// Returns whether it accepted a hit.
+#[allow(clippy::too_many_arguments)]
+fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: u32, blas: u32, w2o: &Affine, ray: &Ray, best: &mut Best, first_hit: bool) -> bool {
+    let origin = w2o.point(ray.origin);
+    let dir = w2o.vector(ray.direction);
+    let boxes = BoxRay::new(origin, dir);
+    let flags = ray.flags;
+    let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
+    let flip = iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING);
+    let face_cull = !iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE);
+    let cull_back = face_cull && flags.contains(RayFlags::CULL_BACK_FACING_TRIANGLES);
+    let cull_front = face_cull && flags.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES);
+    // Opacity only matters here when the ray culls by it.
+    let opacity_matters = flags.intersects(RayFlags::CULL_OPAQUE | RayFlags::CULL_NO_OPAQUE);
+    let culled_by_opacity = |prim_slot: u32| {
+        if !opacity_matters {
+            return false;
+        }
+        let id = view.prim_ids.get(prim_slot as usize).copied().unwrap_or(0);
+        let (g, _) = view.locate(id);
+        opacity_culled(resolve_opacity(view, g, inst, flags), flags)
+    };
+    let sheared = ShearedRay::new(origin, dir);
+    let base = stack.len();
+    stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
+    let mut found = false;
+    while stack.len() > base {
+        let Some(e) = stack.pop() else { break };
+        if e.t > best.t {
+            continue;
+        }
+        if e.child & LEAF_BIT == 0 {
+            push_children(stack, view.nodes, e.child, &boxes, ray.t_min, best.t);
+            continue;
+        }
+        let first = e.child & !LEAF_BIT;
+        for p in first..first + e.count {
+            match view.prim_kind {
+                PrimKind::Triangles => {
+                    let Some(tri) = view.triangles.get(p as usize) else { continue };
+                    let Some(h) = sheared.intersect(tri) else { continue };
+                    if !(h.t > ray.t_min && h.t < best.t) {
+                        continue;
+                    }
+                    let front = h.front_face != flip;
+                    if (front && cull_front) || (!front && cull_back) || culled_by_opacity(p) {
+                        continue;
+                    }
+                    *best = Best { t: h.t, kind: HitKind::Triangle, instance_slot: slot, blas, prim_slot: p, barycentrics: [h.b, h.c], front_face: front };
+                }
+                _ => {
+                    let Some(b) = view.aabbs.get(p as usize) else { continue };
+                    let Some(t) = boxes.aabb(b, ray.t_min, best.t) else { continue };
+                    if culled_by_opacity(p) {
+                        continue;
+                    }
+                    *best = Best { t, kind: HitKind::Generated, instance_slot: slot, blas, prim_slot: p, barycentrics: [0.0; 2], front_face: false };
+                }
+            }
+            found = true;
+            if first_hit {
+                stack.truncate(base);
+                return true;
+            }
+        }
+    }
+    found
+}
