@@ -33,7 +33,7 @@ pub struct Statistics {
 
 impl Statistics {
     pub fn from_view(v: &View) -> Statistics {
-        let leaf_count = v.nodes.iter().map(|n| (0..4).filter(|&k| n.child[k] != EMPTY_CHILD && n.child[k] & LEAF_BIT != 0).count() as u32).sum();
+        let leaf_count = v.nodes.iter().map(|n| (0..crate::layout::WIDTH).filter(|&k| n.child[k] != EMPTY_CHILD && n.child[k] & LEAF_BIT != 0).count() as u32).sum();
         let h = v.header;
         Statistics {
             top_level: h.kind == 0,

@@ -1,10 +1,11 @@
-//! Top-down binned SAH builder (Wald 2007), filling 4-wide nodes by repeatedly splitting the
+//! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
 //! child with the largest surface area. Primitive references are partitioned in place, so the
 //! final order is the order of `refs` on return. Small ranges are split with an exact SAH
 //! sweep over sorted centroids instead of bins.
 
 use super::tree::{Child, InnerNode, Tree};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
+use crate::layout::WIDTH;
 use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
@@ -371,7 +372,8 @@ struct Part {
 fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, depth: u32) -> (Aabb, Child) {
     let n = refs.len();
     let leaf = (info.bounds, Child::Leaf { first: base, count: n as u32 });
-    if n <= 3 {
+    // Fewer primitives than a node has slots: always a leaf (so every inner node is full).
+    if n < WIDTH {
         return leaf;
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
@@ -383,11 +385,11 @@ fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: Range
             return leaf;
         }
     }
-    let mut parts = [Part { begin: 0, end: 0, info: RangeInfo::EMPTY }; 4];
+    let mut parts = [Part { begin: 0, end: 0, info: RangeInfo::EMPTY }; WIDTH];
     parts[0] = Part { begin: 0, end: first.mid, info: first.left };
     parts[1] = Part { begin: first.mid, end: n, info: first.right };
     let mut count = 2;
-    while count < 4 {
+    while count < WIDTH {
         // Split the part with the largest area that has at least two primitives.
         let mut pick = None;
         let mut best_area = -1.0f32;
@@ -409,7 +411,7 @@ fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: Range
     parts.sort_by_key(|p| p.begin);
     // Hand each part its own disjoint slice, then build them (in parallel when large).
     type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
-    let mut slices: [Slot; 4] = [None, None, None, None];
+    let mut slices: [Slot; WIDTH] = Default::default();
     let (mut rest, mut aux_rest) = (refs, aux);
     let mut at = 0;
     for (slot, p) in slices.iter_mut().zip(parts.iter()) {

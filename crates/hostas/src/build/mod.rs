@@ -2,8 +2,8 @@
 //!
 //! Each preset names an algorithm and its knobs; `PREFER_FAST_TRACE`, `PREFER_FAST_BUILD`,
 //! `LOW_MEMORY` and the default select them (see [`Preset::from_flags`]). All builders make
-//! 4-wide trees top-down by splitting the most promising child of a node until it has four, so
-//! every inner node has four children and the size plan's node bound holds.
+//! 8-wide trees top-down by splitting the most promising child of a node until it has eight,
+//! so every inner node has eight children and the size plan's node bound holds.
 
 pub mod binned_sah;
 pub mod morton;
@@ -62,7 +62,7 @@ pub struct Preset {
 impl Preset {
     pub const FAST_TRACE: Preset =
         Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8, traversal_cost: 2.0 };
-    pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 4, traversal_cost: 1.0 };
+    pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 7, traversal_cost: 1.0 };
     pub const DEFAULT: Preset =
         Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8, traversal_cost: 3.0 };
     pub const LOW_MEMORY: Preset =

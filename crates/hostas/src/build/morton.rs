@@ -1,10 +1,11 @@
 //! Fast builder: sort primitives by the Morton code of their centroid (radix sort), then split
 //! each range at the highest bit in which its first and last codes differ (a top-down LBVH),
-//! filling 4-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
+//! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 
 use super::binned_sah::RangeInfo;
 use super::tree::{Child, InnerNode, Tree};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
+use crate::layout::WIDTH;
 use crate::math::Aabb;
 use rayon::prelude::*;
 
@@ -93,15 +94,16 @@ fn split_point(codes: &[u64]) -> usize {
 
 fn build_child(refs: &[PrimRef], codes: &[u64], base: u32, max_leaf: usize, depth: u32) -> (Aabb, Child) {
     let n = refs.len();
-    if n <= max_leaf {
+    if n <= max_leaf.max(WIDTH - 1) {
         let mut b = Aabb::EMPTY;
         for r in refs {
             b = b.union(&r.bounds());
         }
         return (b, Child::Leaf { first: base, count: n as u32 });
     }
-    let mut parts = [(0usize, n), (0, 0), (0, 0), (0, 0)];
-    for count in 1..4 {
+    let mut parts = [(0usize, 0usize); WIDTH];
+    parts[0] = (0, n);
+    for count in 1..WIDTH {
         // Split the part with the most primitives (areas are not known top-down).
         let Some(i) = (0..count).filter(|&i| parts[i].1 - parts[i].0 >= 2).max_by_key(|&i| (parts[i].1 - parts[i].0, usize::MAX - i)) else { break };
         let (b, e) = parts[i];

@@ -1,6 +1,7 @@
 //! The builders' output: a 4-wide tree over positions in the final primitive order. Builders
 //! know geometry, not bytes; `layout::encode` turns this into bytes.
 
+use crate::layout::WIDTH;
 use crate::math::Aabb;
 
 #[derive(Debug)]
@@ -10,10 +11,11 @@ pub enum Child {
     Inner(Box<InnerNode>),
 }
 
-/// An inner node with two to four children, each with its exact bounds.
+/// An inner node with up to `WIDTH` children (always all of them, see the size plan), each
+/// with its exact bounds.
 #[derive(Debug)]
 pub struct InnerNode {
-    slots: [(Aabb, Child); 4],
+    slots: [(Aabb, Child); WIDTH],
     len: u8,
     /// Inner nodes in this subtree, this one included (the encoder lays subtrees out
     /// side by side from it).
@@ -23,7 +25,7 @@ pub struct InnerNode {
 impl InnerNode {
     pub fn new(children: impl IntoIterator<Item = (Aabb, Child)>) -> InnerNode {
         let mut node = InnerNode { slots: std::array::from_fn(|_| (Aabb::EMPTY, Child::Leaf { first: 0, count: 0 })), len: 0, nodes: 1 };
-        for c in children.into_iter().take(4) {
+        for c in children.into_iter().take(WIDTH) {
             if let Child::Inner(n) = &c.1 {
                 node.nodes += n.nodes;
             }

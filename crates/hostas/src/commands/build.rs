@@ -700,11 +700,11 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
         PrimKind::None => {}
     }
     // Refit: leaves from primitive bounds, inner children from their node's children.
-    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut bytes[h.nodes_offset as usize..h.nodes_offset as usize + 128 * h.node_count as usize])
+    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut bytes[h.nodes_offset as usize..h.nodes_offset as usize + crate::layout::NODE_SIZE as usize * h.node_count as usize])
         .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
     let mut root = Aabb::EMPTY;
     for i in (0..nodes.len()).rev() {
-        for k in 0..4 {
+        for k in 0..crate::layout::WIDTH {
             let c = nodes[i].child[k];
             if c == EMPTY_CHILD {
                 continue;
@@ -715,7 +715,7 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
                 bounds[first..first + count].iter().fold(Aabb::EMPTY, |a, b| a.union(b))
             } else {
                 let child = &nodes[c as usize];
-                (0..4).filter(|&j| child.child[j] != EMPTY_CHILD).fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
+                (0..crate::layout::WIDTH).filter(|&j| child.child[j] != EMPTY_CHILD).fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
             };
             nodes[i].set_bounds(k, &b);
             if i == 0 {

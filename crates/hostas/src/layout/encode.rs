@@ -3,7 +3,7 @@
 //! Nothing is assumed about the previous contents of the memory.
 
 use super::plan::Plan;
-use super::{HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, GeometryRecord};
+use super::{WIDTH, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, GeometryRecord};
 use crate::build::tree::{Child, InnerNode, Tree};
 use rayon::prelude::*;
 use crate::error::{Error, Result};
@@ -34,7 +34,7 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
     let g_bytes = &mut dst[plan.geometries_offset as usize..plan.geometries_offset as usize + super::GEOMETRY_RECORD_SIZE as usize * geometries.len()];
     g_bytes.copy_from_slice(bytemuck::cast_slice(geometries));
 
-    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut dst[plan.nodes_offset as usize..(plan.nodes_offset + 128 * plan.node_capacity) as usize])
+    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut dst[plan.nodes_offset as usize..(plan.nodes_offset + super::NODE_SIZE * plan.node_capacity) as usize])
         .map_err(|e| Error::NotSupported(format!("acceleration structure memory is not 64-byte aligned ({e})")))?;
 
     let root_area = match &tree.root {
@@ -79,7 +79,7 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
         header_flags: fields.header_flags,
         preset: fields.preset,
         bounds,
-        used_size: plan.nodes_offset + 128 * node_count as u64,
+        used_size: plan.nodes_offset + super::NODE_SIZE * node_count as u64,
         allocated_size,
         geometries_offset: plan.geometries_offset,
         nodes_offset: plan.nodes_offset,
@@ -118,7 +118,7 @@ impl Writer {
         let mut sah = 0.0;
         let mut next = index + 1;
         // Children's subtrees take consecutive ranges of `rest`, in slot order.
-        let mut jobs: [Option<(&InnerNode, &mut [Node], u32)>; 4] = [None, None, None, None];
+        let mut jobs: [Option<(&InnerNode, &mut [Node], u32)>; WIDTH] = Default::default();
         for (k, (b, c)) in inner.children().iter().enumerate() {
             node.set_bounds(k, b);
             match c {

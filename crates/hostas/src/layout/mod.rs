@@ -17,7 +17,7 @@
 //!              instances: InstanceRecord (128 bytes)
 //! prim_ids     u32 per stored primitive: the primitive's sequence number across all geometries
 //!              (geometry's first primitive + primitive index), inactive primitives counted
-//! nodes        Node per BVH4 node (128 bytes), depth-first order, root first; last, so that
+//! nodes        Node per 8-wide node (256 bytes), depth-first order, root first; last, so that
 //!              the used size ends at the last node
 //! ```
 //! Every section starts at a multiple of [`SECTION_ALIGN`]. All fields are little-endian.
@@ -32,11 +32,13 @@ use bytemuck::{Pod, Zeroable};
 /// `b"HOST"` read as a little-endian u32.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HOST");
 /// Bumped on any change of the byte layout; part of the compatibility UUID.
-pub const LAYOUT_VERSION: u32 = 2;
+pub const LAYOUT_VERSION: u32 = 3;
 pub const SECTION_ALIGN: u64 = 64;
 pub const HEADER_SIZE: u64 = 256;
 /// Branching factor of the stored tree.
-pub const WIDTH: usize = 4;
+pub const WIDTH: usize = 8;
+/// Bytes per node.
+pub const NODE_SIZE: u64 = 256;
 /// Most primitives in one leaf.
 pub const MAX_LEAF_SIZE: usize = 15;
 /// Deepest tree the encoder writes; traversal stacks are sized from it.
@@ -157,36 +159,37 @@ pub struct GeometryRecord {
 pub const GEOMETRY_RECORD_SIZE: u64 = std::mem::size_of::<GeometryRecord>() as u64;
 const _: () = assert!(GEOMETRY_RECORD_SIZE == 48);
 
-/// A 4-wide node: child boxes in structure-of-arrays form, so one ray tests all four at once.
+/// An 8-wide node: child boxes in structure-of-arrays form, so one ray tests all eight at once
+/// (one AVX2 pass, or two SSE passes).
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[repr(C, align(64))]
 pub struct Node {
-    pub lo_x: [f32; 4],
-    pub hi_x: [f32; 4],
-    pub lo_y: [f32; 4],
-    pub hi_y: [f32; 4],
-    pub lo_z: [f32; 4],
-    pub hi_z: [f32; 4],
+    pub lo_x: [f32; WIDTH],
+    pub hi_x: [f32; WIDTH],
+    pub lo_y: [f32; WIDTH],
+    pub hi_y: [f32; WIDTH],
+    pub lo_z: [f32; WIDTH],
+    pub hi_z: [f32; WIDTH],
     /// Node index, `LEAF_BIT | first stored primitive`, or `EMPTY_CHILD`.
-    pub child: [u32; 4],
+    pub child: [u32; WIDTH],
     /// Primitives in each leaf child (0 for inner or empty children).
-    pub count: [u8; 4],
-    pub reserved: [u32; 3],
+    pub count: [u8; WIDTH],
+    pub reserved: [u32; 6],
 }
 
-const _: () = assert!(std::mem::size_of::<Node>() == 128);
+const _: () = assert!(std::mem::size_of::<Node>() == NODE_SIZE as usize);
 
 impl Node {
     pub const EMPTY: Node = Node {
-        lo_x: [f32::INFINITY; 4],
-        hi_x: [f32::NEG_INFINITY; 4],
-        lo_y: [f32::INFINITY; 4],
-        hi_y: [f32::NEG_INFINITY; 4],
-        lo_z: [f32::INFINITY; 4],
-        hi_z: [f32::NEG_INFINITY; 4],
-        child: [EMPTY_CHILD; 4],
-        count: [0; 4],
-        reserved: [0; 3],
+        lo_x: [f32::INFINITY; WIDTH],
+        hi_x: [f32::NEG_INFINITY; WIDTH],
+        lo_y: [f32::INFINITY; WIDTH],
+        hi_y: [f32::NEG_INFINITY; WIDTH],
+        lo_z: [f32::INFINITY; WIDTH],
+        hi_z: [f32::NEG_INFINITY; WIDTH],
+        child: [EMPTY_CHILD; WIDTH],
+        count: [0; WIDTH],
+        reserved: [0; 6],
     };
     pub fn set_bounds(&mut self, k: usize, b: &Aabb) {
         self.lo_x[k] = b.lo[0];

@@ -17,11 +17,11 @@ pub struct Plan {
 }
 
 /// Most nodes a tree over `n` primitives can need. Every inner node the builders make has all
-/// four children (an inner node is only made for more than three primitives, and a node is
+/// eight children (an inner node is only made for at least eight primitives, and a node is
 /// always filled before its children are considered), so `n` leaves need at most
-/// `(n - 1) / 3` inner nodes; one more for the root of an empty or one-leaf tree.
+/// `(n - 1) / 7` inner nodes; one for the root of an empty or one-leaf tree.
 pub fn max_nodes(n: u64) -> u64 {
-    (n.saturating_sub(1)).div_ceil(3).max(1)
+    (n.saturating_sub(1)).div_ceil(super::WIDTH as u64 - 1).max(1)
 }
 
 impl Plan {
@@ -33,7 +33,7 @@ impl Plan {
         let prim_ids_offset = align_up(prims_offset + kind.prim_size() * max_prims, SECTION_ALIGN);
         let nodes_offset = align_up(prim_ids_offset + 4 * max_prims, SECTION_ALIGN);
         let node_capacity = max_nodes(max_prims);
-        let total_size = nodes_offset + 128 * node_capacity;
+        let total_size = nodes_offset + super::NODE_SIZE * node_capacity;
         Plan { geometries_offset, nodes_offset, prims_offset, prim_ids_offset, node_capacity, prim_capacity: max_prims, total_size }
     }
 }

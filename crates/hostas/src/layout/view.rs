@@ -88,7 +88,7 @@ impl<'a> View<'a> {
             h.geometries_offset + super::GEOMETRY_RECORD_SIZE * h.geometry_count as u64,
             h.prims_offset + prim_kind.prim_size() * stored,
             h.prim_ids_offset + 4 * stored,
-            h.nodes_offset + 128 * h.node_count as u64,
+            h.nodes_offset + super::NODE_SIZE * h.node_count as u64,
         ];
         if ends.iter().any(|&e| e > h.used_size) {
             return Err("a section ends past the used size".into());
@@ -127,7 +127,7 @@ impl<'a> View<'a> {
             depth[0] = 1;
         }
         for (i, n) in nodes.iter().enumerate() {
-            for k in 0..4 {
+            for k in 0..super::WIDTH {
                 let c = n.child[k];
                 if c == EMPTY_CHILD {
                     continue;

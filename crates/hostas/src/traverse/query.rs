@@ -11,7 +11,7 @@ use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
 use crate::error::{Error, Location, Result};
 use crate::layout::view::View;
-use crate::layout::{EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind};
+use crate::layout::{WIDTH, EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind};
 use crate::math::{Affine, Vec3, fmax, fmin};
 use ash::vk;
 
@@ -94,7 +94,7 @@ impl Intersection {
     }
 }
 
-const STACK_CAPACITY: usize = 3 * MAX_DEPTH as usize + 4;
+const STACK_CAPACITY: usize = (WIDTH - 1) * MAX_DEPTH as usize + WIDTH;
 
 #[derive(Clone, Copy, Default)]
 pub(super) struct Entry {
@@ -165,17 +165,17 @@ impl BoxRay {
         BoxRay { origin, inv, neg: inv.map(|i| i < 0.0) }
     }
 
-    /// Entry distances of the four children of `node`; `f32::INFINITY` where the segment
+    /// Entry distances of the children of `node`; `f32::INFINITY` where the segment
     /// `[t_min, t_max]` misses (inclusive at both ends).
     #[inline(always)]
-    pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; 4] {
+    pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; WIDTH] {
         let (nx, fx) = if self.neg[0] { (&n.hi_x, &n.lo_x) } else { (&n.lo_x, &n.hi_x) };
         let (ny, fy) = if self.neg[1] { (&n.hi_y, &n.lo_y) } else { (&n.lo_y, &n.hi_y) };
         let (nz, fz) = if self.neg[2] { (&n.hi_z, &n.lo_z) } else { (&n.lo_z, &n.hi_z) };
         let [ox, oy, oz] = self.origin;
         let [ix, iy, iz] = self.inv;
-        let mut out = [f32::INFINITY; 4];
-        for k in 0..4 {
+        let mut out = [f32::INFINITY; WIDTH];
+        for k in 0..WIDTH {
             let near = fmax(fmax((nx[k] - ox) * ix, (ny[k] - oy) * iy), fmax((nz[k] - oz) * iz, t_min));
             let far = fmin(fmin((fx[k] - ox) * ix, (fy[k] - oy) * iy), (fz[k] - oz) * iz) * ROBUST_FAR;
             out[k] = if near <= fmin(far, t_max) { near } else { f32::INFINITY };
@@ -231,9 +231,9 @@ impl<'s> Level<'s> {
             let Some(node) = self.view.nodes.get(e.child as usize) else { continue };
             let t = self.ray.node(node, t_min, t_max);
             // Push hit children farthest first, so the nearest is popped next.
-            let mut hits = [Entry::default(); 4];
+            let mut hits = [Entry::default(); WIDTH];
             let mut n = 0;
-            for k in 0..4 {
+            for k in 0..WIDTH {
                 if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
                     // Insertion into `hits`, kept in decreasing distance.
                     let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };

@@ -13,7 +13,7 @@ use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
 use crate::error::Result;
 use crate::layout::view::View;
-use crate::layout::{EMPTY_CHILD, InstanceRecord, LEAF_BIT, PrimKind};
+use crate::layout::{WIDTH, InstanceRecord, LEAF_BIT, PrimKind};
 use crate::math::Affine;
 use ash::vk;
 
@@ -151,21 +151,38 @@ impl<'s> Tracer<'s> {
 fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u32, ray: &BoxRay, t_min: f32, t_max: f32) {
     let Some(node) = nodes.get(index as usize) else { return };
     let t = ray.node(node, t_min, t_max);
-    let mut hits = [Entry::default(); 4];
-    let mut n = 0;
-    for k in 0..4 {
-        if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
-            let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };
-            let mut j = n;
-            while j > 0 && hits[j - 1].t < e.t {
-                hits[j] = hits[j - 1];
-                j -= 1;
+    // Empty slots have inverted boxes and never hit, so only the mask of hits matters.
+    let mut mask = 0u32;
+    for (k, tk) in t.iter().enumerate() {
+        mask |= ((*tk != f32::INFINITY) as u32) << k;
+    }
+    if mask == 0 {
+        return;
+    }
+    if mask & (mask - 1) == 0 {
+        let k = mask.trailing_zeros() as usize;
+        stack.push(Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] });
+        return;
+    }
+    {
+        {
+            let mut hits = [Entry::default(); WIDTH];
+            let mut n = 0;
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };
+                let mut j = n;
+                while j > 0 && hits[j - 1].t < e.t {
+                    hits[j] = hits[j - 1];
+                    j -= 1;
+                }
+                hits[j] = e;
+                n += 1;
             }
-            hits[j] = e;
-            n += 1;
+            stack.extend_from_slice(&hits[..n]);
         }
     }
-    stack.extend_from_slice(&hits[..n]);
 }
 
 /// Traverses one instance's bottom-level structure on top of `stack`, updating `best`.
