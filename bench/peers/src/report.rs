@@ -35,7 +35,7 @@ pub struct Row {
     pub build_ms: BTreeMap<usize, f64>,
     pub sah: Option<f64>,
     pub sah_note: String,
-    /// The SAH is of a wide tree (hostas reports its 4-wide tree's), not a binary one.
+    /// The SAH is of a wide tree (hostas reports its 8-wide tree's), not a binary one.
     pub sah_wide: bool,
     pub bytes: Option<u64>,
     pub bytes_note: String,
@@ -230,7 +230,7 @@ impl SceneReport {
                 r.variant,
                 f(b1, 2),
                 f(bn, 2),
-                if r.sah_wide { format!("{} (4-wide)", f(r.sah, 2)) } else { f(r.sah, 2) },
+                if r.sah_wide { format!("{} (8-wide)", f(r.sah, 2)) } else { f(r.sah, 2) },
                 f(bpt, 1),
                 f(r.mrays(Kind::Primary), 2),
                 f(r.mrays(Kind::Incoherent), 2),
@@ -274,7 +274,7 @@ impl SceneReport {
         }
         if !ratio_rows.is_empty() {
             s += &format!(
-                "\nhostas ÷ peer (throughputs: > 1 means hostas is faster; SAH and bytes: < 1 means hostas is lower; n/c: hostas reports the SAH of its 4-wide tree, not comparable with a binary tree's):\n\n| peer | hostas preset | build 1T | build {tn}T | SAH | B/tri | primary | incoherent | refit 1T | refit {tn}T |\n|---|---|--:|--:|--:|--:|--:|--:|--:|--:|\n"
+                "\nhostas ÷ peer (throughputs: > 1 means hostas is faster; SAH and bytes: < 1 means hostas is lower; n/c: hostas reports the SAH of its 8-wide tree, not comparable with a binary tree's):\n\n| peer | hostas preset | build 1T | build {tn}T | SAH | B/tri | primary | incoherent | refit 1T | refit {tn}T |\n|---|---|--:|--:|--:|--:|--:|--:|--:|--:|\n"
             );
             s += &ratio_rows;
         }
@@ -316,7 +316,7 @@ impl SceneReport {
                 "scene": self.scene, "tris": self.tris, "library": r.library, "key": r.key, "variant": r.variant,
                 "class": r.class.map(|c| c.hostas_key()), "threads_all": tn,
                 "build_ms": build_ms, "build_mtris_s": build_mtris,
-                "sah_ct1_ci1": r.sah, "sah_note": r.sah_note, "sah_tree": if r.sah_wide { "4-wide" } else { "binary" },
+                "sah_ct1_ci1": r.sah, "sah_note": r.sah_note, "sah_tree": if r.sah_wide { "8-wide" } else { "binary" },
                 "bytes": r.bytes, "bytes_per_tri": r.bytes.map(|b| b as f64 / self.tris as f64), "bytes_note": r.bytes_note,
                 "primary_mrays_s_1t": r.mrays(Kind::Primary), "incoherent_mrays_s_1t": r.mrays(Kind::Incoherent),
                 "rays_per_kind": r.rays[0].max(r.rays[1]),

@@ -260,9 +260,8 @@ fn trace_speed(device: &Device, tlas: AccelerationStructure, rays: &[Ray]) -> Re
     let n: usize = rays
         .par_chunks(1024)
         .map(|c| {
-            c.iter()
-                .map(|r| scene.trace_closest(r).map(|h| h.is_hit() as usize))
-                .sum::<hostas::Result<usize>>()
+            let mut tracer = scene.tracer();
+            c.iter().map(|r| tracer.closest(r).map(|h| h.is_hit() as usize)).sum::<hostas::Result<usize>>()
         })
         .collect::<hostas::Result<Vec<usize>>>()
         .map_err(|e| anyhow!("{e}"))?

@@ -67,11 +67,12 @@ pub fn run(a: TraceArgs) -> Result<()> {
         .enumerate()
         .map(|(c, chunk)| {
             let mut out = Vec::with_capacity(chunk.len() * HIT_SIZE);
+            let mut tracer = scene.tracer();
             for (k, ray) in chunk.iter().enumerate() {
                 let hit: Hit = if a.any_hit {
-                    scene.trace_any(ray)
+                    tracer.any(ray)
                 } else {
-                    scene.trace_closest(ray)
+                    tracer.closest(ray)
                 }
                 .map_err(|e| anyhow!("{}: ray {}: {e}", a.rays.display(), c * CHUNK + k))?;
                 out.extend_from_slice(&records::encode_hit(&hit));
