@@ -4,8 +4,8 @@ use bytemuck::{Pod, Zeroable};
 
 pub type Vec3 = [f32; 3];
 
-/// `min` as one instruction (`minss`): unlike `f32::min` it does not special-case NaN, which
-/// never reaches the hot paths that use it (inactive primitives are removed before).
+/// `min` as one instruction (`minss`): unlike `f32::min` it does not special-case NaN; when
+/// `a` is NaN it returns `b` (the slab tests rely on that, see `traverse::query::BoxRay`).
 #[inline(always)]
 pub fn fmin(a: f32, b: f32) -> f32 {
     if a < b { a } else { b }

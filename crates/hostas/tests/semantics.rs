@@ -439,3 +439,36 @@ fn batch_tracing_matches_single_rays() {
         }
     }
 }
+
+/// Axis-aligned rays exactly through grid vertices and along grid lines: the ray lies in the
+/// boundary planes of many boxes (a zero direction component with the origin on a slab plane),
+/// which must count as inside.
+#[test]
+fn axis_aligned_rays_on_box_boundaries() {
+    let n = 24;
+    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![generate::grid(n, None)] }], instances: vec![InstanceDesc::identity(0)] };
+    let device = Device::new();
+    for preset in PRESETS {
+        let built = desc.build(&device, preset, preset).unwrap();
+        let scene = device.scene(built.tlas).unwrap();
+        for y in 1..n {
+            for x in 1..n {
+                for (dir, z) in [([0.0f32, 0.0, -1.0], 3.0f32), ([0.0, 0.0, 1.0], -3.0), ([-0.0, 0.0, -1.0], 3.0)] {
+                    let ray = Ray::new([x as f32, y as f32, z], dir);
+                    assert_eq!(count_candidates(&scene, &ray), 1, "vertex ({x}, {y}) dir {dir:?} preset {preset:?}");
+                    assert!(scene.trace_closest(&ray).unwrap().is_hit());
+                    let ray = Ray::new([x as f32 + 0.5, y as f32, z], dir);
+                    assert_eq!(count_candidates(&scene, &ray), 1, "edge ({x}.5, {y}) dir {dir:?} preset {preset:?}");
+                }
+            }
+        }
+    }
+    // A flat box hit exactly along its plane and at its boundary.
+    let boxes = GeometryDesc::Aabbs { boxes: vec![[0.0, 0.0, 0.0, 1.0, 1.0, 0.0]], flags: vk::GeometryFlagsKHR::OPAQUE };
+    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![boxes] }], instances: vec![InstanceDesc::identity(0)] };
+    let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
+    let scene = device.scene(built.tlas).unwrap();
+    for ray in [Ray::new([-1.0, 0.5, 0.0], [1.0, 0.0, 0.0]), Ray::new([1.0, 1.0, 2.0], [0.0, 0.0, -1.0]), Ray::new([0.0, -1.0, 0.0], [0.0, 1.0, 0.0])] {
+        assert!(scene.trace_closest(&ray).unwrap().is_hit(), "{ray:?}");
+    }
+}

@@ -159,10 +159,11 @@ pub(super) struct BoxRay {
 
 impl BoxRay {
     pub(super) fn new(origin: Vec3, dir: Vec3) -> BoxRay {
-        // A zero component gives a huge finite inverse, not infinity, so that a ray lying in a
-        // slab's plane computes 0 * x = 0 instead of 0 * inf = NaN.
-        let inv = dir.map(|d| if d == 0.0 { f32::MAX.copysign(d) } else { 1.0 / d });
-        BoxRay { origin, inv, neg: inv.map(|i| i < 0.0) }
+        // A zero component gives an infinite inverse: a slab the origin is outside of gives
+        // +-inf (never entered), and a ray lying exactly in a slab's plane gives 0 * inf = NaN,
+        // which the min/max below drop (the ray is inside that slab, boundaries included).
+        let inv = dir.map(|d| 1.0 / d);
+        BoxRay { origin, inv, neg: inv.map(|i| i.is_sign_negative()) }
     }
 
     /// Entry distances of the children of `node`; `f32::INFINITY` where the segment
@@ -176,24 +177,26 @@ impl BoxRay {
         let [ix, iy, iz] = self.inv;
         let mut out = [f32::INFINITY; WIDTH];
         for k in 0..WIDTH {
-            let near = fmax(fmax((nx[k] - ox) * ix, (ny[k] - oy) * iy), fmax((nz[k] - oz) * iz, t_min));
-            let far = fmin(fmin((fx[k] - ox) * ix, (fy[k] - oy) * iy), (fz[k] - oz) * iz) * ROBUST_FAR;
-            out[k] = if near <= fmin(far, t_max) { near } else { f32::INFINITY };
+            // `fmax(a, b)` and `fmin(a, b)` return `b` when `a` is NaN: each axis term goes
+            // first, so a NaN from a ray in a slab plane leaves the interval unbounded there.
+            let near = fmax((nx[k] - ox) * ix, fmax((ny[k] - oy) * iy, fmax((nz[k] - oz) * iz, t_min)));
+            let far = fmin((fx[k] - ox) * ix * ROBUST_FAR, fmin((fy[k] - oy) * iy * ROBUST_FAR, fmin((fz[k] - oz) * iz * ROBUST_FAR, t_max)));
+            out[k] = if near <= far { near } else { f32::INFINITY };
         }
         out
     }
 
     #[inline(always)]
     pub(super) fn aabb(&self, b: &[f32; 6], t_min: f32, t_max: f32) -> Option<f32> {
+        // As in `node`: axis terms first, so NaN (ray in a slab plane) means "inside".
         let mut near = t_min;
-        let mut far = f32::INFINITY;
+        let mut far = t_max;
         for k in 0..3 {
-            let t0 = (b[k] - self.origin[k]) * self.inv[k];
-            let t1 = (b[k + 3] - self.origin[k]) * self.inv[k];
-            near = near.max(t0.min(t1));
-            far = far.min(t0.max(t1));
+            let (lo, hi) = if self.neg[k] { (b[k + 3], b[k]) } else { (b[k], b[k + 3]) };
+            near = fmax((lo - self.origin[k]) * self.inv[k], near);
+            far = fmin((hi - self.origin[k]) * self.inv[k] * ROBUST_FAR, far);
         }
-        (near <= (far * ROBUST_FAR).min(t_max)).then_some(near)
+        (near <= far).then_some(near)
     }
 }
 
