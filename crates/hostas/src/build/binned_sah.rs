@@ -302,32 +302,54 @@ fn binned_split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx
     (i > 0 && i < refs.len()).then_some(Split { mid: i, left: left.info(), right: right.info(), cost })
 }
 
-/// Exact SAH split of a small range: sort by centroid on each axis and sweep every position.
+/// Exact SAH split of a small range: order by centroid on each axis (a sort of small keys, not
+/// of the references) and sweep every position; the references are permuted once, for the
+/// winning axis.
 fn sweep_split(refs: &mut [PrimRef]) -> Split {
     let n = refs.len();
+    debug_assert!(n <= SMALL);
+    let boxes: [B4; SMALL] = std::array::from_fn(|i| if i < n { B4::of(&refs[i]) } else { B4::EMPTY });
     let mut best = (f32::INFINITY, 0usize, n / 2);
+    let mut best_order = [0u8; SMALL];
     let mut right_area = [0f32; SMALL];
     for k in 0..3 {
-        refs.sort_unstable_by(|a, b| (a.lo[k] + a.hi[k]).total_cmp(&(b.lo[k] + b.hi[k])).then(a.id.cmp(&b.id)));
+        // Insertion sort of (centroid, index): ties keep input order, so the result is
+        // deterministic.
+        let mut order = [0u8; SMALL];
+        let mut key = [0f32; SMALL];
+        for i in 0..n {
+            let c = boxes[i].lo[k] + boxes[i].hi[k];
+            let mut j = i;
+            while j > 0 && key[j - 1] > c {
+                key[j] = key[j - 1];
+                order[j] = order[j - 1];
+                j -= 1;
+            }
+            key[j] = c;
+            order[j] = i as u8;
+        }
         let mut acc = B4::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&B4::of(&refs[i]));
+            acc.grow(&boxes[order[i] as usize]);
             right_area[i] = acc.half_area();
         }
         let mut acc = B4::EMPTY;
         for i in 1..n {
-            acc.grow(&B4::of(&refs[i - 1]));
+            acc.grow(&boxes[order[i - 1] as usize]);
             let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
             if cost < best.0 {
                 best = (cost, k, i);
+                best_order = order;
             }
         }
     }
-    let (cost, k, mid) = best;
-    if k != 2 {
-        refs.sort_unstable_by(|a, b| (a.lo[k] + a.hi[k]).total_cmp(&(b.lo[k] + b.hi[k])).then(a.id.cmp(&b.id)));
+    let (cost, _, mid) = best;
+    if cost.is_finite() {
+        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| if i < n { refs[i] } else { PrimRef::new(&Aabb::EMPTY, 0) });
+        for (dst, &src) in refs.iter_mut().zip(&best_order[..n]) {
+            *dst = copy[src as usize];
+        }
     }
-    let cost = if cost.is_finite() { cost } else { f32::INFINITY };
     Split { mid, left: RangeInfo::of(&refs[..mid]), right: RangeInfo::of(&refs[mid..]), cost }
 }
 
