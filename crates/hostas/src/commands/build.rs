@@ -147,8 +147,9 @@ impl Device {
                 let crate::input::GeometryData::Instances(data) = &geom.data else { continue };
                 let Some(range) = ranges[i].get(g) else { continue };
                 let Ok(reader) = InstanceReader::new(data, range, Location::info(i).geometry(g)) else { continue };
+                // Unreadable instances are reported by the per-info pass; stop at the first.
                 for p in 0..reader.primitive_count {
-                    let Ok(inst) = reader.instance(p) else { continue };
+                    let Ok(inst) = reader.instance(p) else { break };
                     let r = inst.acceleration_structure_reference;
                     if r == 0 {
                         continue;
@@ -239,7 +240,7 @@ impl Device {
                     first_vertex: if index_type == vk::IndexType::NONE_KHR.as_raw() as u32 { 0 } else { r.first_vertex },
                     reserved: [0; 3],
                 };
-                first += r.primitive_count;
+                first = first.saturating_add(r.primitive_count);
                 rec
             })
             .collect()
@@ -419,6 +420,8 @@ impl Device {
             return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03726", at, format!("scratch holds {scratch_len} bytes, the update needs {need}")));
         }
         let readers = self.readers(info, ranges, at)?;
+        let total: u64 = ranges.iter().map(|r| r.primitive_count as u64).sum();
+        validate::counts(kind, prim_kind, total, at, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03801")?;
         let records = Self::geometry_records(info, ranges);
         // Instances: decode before locking, to read the referenced BLASes' bounds.
         let mut instance_updates: Vec<(InstanceRecord, Aabb)> = Vec::new();

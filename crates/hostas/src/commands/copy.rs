@@ -297,6 +297,16 @@ impl Device {
     /// handles of the bottom-level structures deserialized for it.
     pub fn deserialize(&self, bytes: &[u8]) -> Result<AccelerationStructure> {
         let header = SerializedHeader::parse(bytes)?;
+        // Untrusted sizes: nothing is allocated for more than the data actually holds.
+        let start = SERIALIZED_HEADER_SIZE + 8 * header.handles.len() as u64;
+        if start.checked_add(header.deserialized_size).is_none_or(|end| end > bytes.len() as u64) {
+            return Err(Error::RangeTooShort {
+                what: "serialized data",
+                needed: start.saturating_add(header.deserialized_size),
+                available: bytes.len() as u64,
+                location: Location::NONE,
+            });
+        }
         let mut words = vec![0u128; bytes.len().div_ceil(16)];
         let aligned: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
         aligned[..bytes.len()].copy_from_slice(bytes);

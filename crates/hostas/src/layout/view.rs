@@ -67,6 +67,11 @@ impl<'a> View<'a> {
         if h.stored_count > h.prim_capacity || h.node_count > h.node_capacity || h.stored_count > h.primitive_count {
             return Err("counts exceed capacities".into());
         }
+        let limits = crate::device::PROPERTIES;
+        let max_prims = if h.kind == 0 { limits.max_instance_count } else { limits.max_primitive_count };
+        if h.primitive_count as u64 > max_prims || h.geometry_count as u64 > limits.max_geometry_count {
+            return Err(format!("{} primitives in {} geometries exceed the device limits", h.primitive_count, h.geometry_count));
+        }
         let geometries: &[GeometryRecord] = section(bytes, h.geometries_offset, h.geometry_count as u64, "geometry")?;
         let nodes: &[Node] = section(bytes, h.nodes_offset, h.node_count as u64, "node")?;
         let stored = h.stored_count as u64;
@@ -104,9 +109,19 @@ impl<'a> View<'a> {
             prev_end = e;
         }
 
-        // Geometries: consecutive primitive ranges covering primitive_count.
+        // Geometries: consecutive primitive ranges covering primitive_count, each of the
+        // structure's primitive kind.
+        let expected_type = match prim_kind {
+            PrimKind::Triangles => Some(ash::vk::GeometryTypeKHR::TRIANGLES),
+            PrimKind::Aabbs => Some(ash::vk::GeometryTypeKHR::AABBS),
+            PrimKind::Instances => Some(ash::vk::GeometryTypeKHR::INSTANCES),
+            PrimKind::None => None,
+        };
         let mut next = 0u64;
         for (i, g) in geometries.iter().enumerate() {
+            if expected_type.is_some_and(|t| g.geometry_type != t.as_raw() as u32) {
+                return Err(format!("geometry {i} has type {} in a structure of {prim_kind:?}", g.geometry_type));
+            }
             if g.first_primitive as u64 != next {
                 return Err(format!("geometry {i} starts at primitive {} instead of {next}", g.first_primitive));
             }

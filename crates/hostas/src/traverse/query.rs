@@ -196,7 +196,8 @@ impl BoxRay {
             near = fmax((lo - self.origin[k]) * self.inv[k], near);
             far = fmin((hi - self.origin[k]) * self.inv[k] * ROBUST_FAR, far);
         }
-        (near <= far).then_some(near)
+        // A ray parallel to a slab it is outside of has near = +inf: no candidate at infinity.
+        (near <= far && near < f32::INFINITY).then_some(near)
     }
 }
 
