@@ -295,7 +295,7 @@ impl Device {
             mask: inst.mask as u32,
             sbt_record_offset: inst.sbt_record_offset,
             flags: inst.flags.as_raw(),
-            reserved: 0,
+            hints: if inst.transform == Affine::IDENTITY { crate::layout::INSTANCE_IDENTITY } else { 0 },
         })
     }
 
@@ -729,6 +729,5 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
     let mut header = *h;
     header.bounds = root;
     bytes[..256].copy_from_slice(bytemuck::bytes_of(&header));
-    let _ = Affine::IDENTITY;
     Ok(())
 }

@@ -217,8 +217,13 @@ pub struct InstanceRecord {
     pub mask: u32,
     pub sbt_record_offset: u32,
     pub flags: u32,
-    pub reserved: u32,
+    /// `INSTANCE_IDENTITY` when the transform is exactly the identity (traversal then skips
+    /// transforming the ray).
+    pub hints: u32,
 }
+
+/// `InstanceRecord::hints` bit: the object-to-world transform is the identity.
+pub const INSTANCE_IDENTITY: u32 = 1;
 
 const _: () = assert!(std::mem::size_of::<InstanceRecord>() == 128);
 

@@ -130,6 +130,10 @@ impl<'a> View<'a> {
         if next != h.primitive_count as u64 {
             return Err("geometry primitive counts do not add up".into());
         }
+        let identity = crate::math::Affine::IDENTITY.to_rows();
+        if let Some(i) = instances.iter().position(|r| r.hints & super::INSTANCE_IDENTITY != 0 && (r.object_to_world != identity || r.world_to_object != identity)) {
+            return Err(format!("instance record {i} is marked identity but is not"));
+        }
         if let Some(bad) = prim_ids.iter().find(|&&id| id >= h.primitive_count) {
             return Err(format!("primitive id {bad} out of range"));
         }

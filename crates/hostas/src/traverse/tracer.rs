@@ -13,7 +13,7 @@ use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
 use crate::error::Result;
 use crate::layout::view::View;
-use crate::layout::{WIDTH, InstanceRecord, LEAF_BIT, PrimKind};
+use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind, WIDTH};
 use crate::math::Affine;
 use ash::vk;
 
@@ -91,6 +91,7 @@ impl<'s> Tracer<'s> {
         let flags = ray.flags;
         let mut best = Best { t: ray.t_max, kind: HitKind::Miss, instance_slot: 0, blas: 0, prim_slot: 0, barycentrics: [0.0; 2], front_face: false };
         let world = BoxRay::new(ray.origin, ray.direction);
+        let mut world_sheared: Option<ShearedRay> = None;
         let mut stack = std::mem::take(&mut self.stack);
         stack.clear();
         stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
@@ -118,8 +119,16 @@ impl<'s> Tracer<'s> {
                 if skip || view.nodes.is_empty() {
                     continue;
                 }
-                let w2o = Affine::from_rows(inst.world_to_object);
-                let found = trace_blas(&mut stack, &view, inst, slot, bi, &w2o, ray, &mut best, first_hit);
+                // An identity instance sees the world ray: no transform, no new inverses.
+                let local = if inst.hints & INSTANCE_IDENTITY != 0 {
+                    let sheared = *world_sheared.get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
+                    (world, sheared)
+                } else {
+                    let w2o = Affine::from_rows(inst.world_to_object);
+                    let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
+                    (BoxRay::new(o, d), ShearedRay::new(o, d))
+                };
+                let found = trace_blas(&mut stack, &view, inst, slot, bi, &local, ray, &mut best, first_hit);
                 if found && first_hit {
                     break 'top;
                 }
@@ -188,10 +197,8 @@ fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u
 /// Traverses one instance's bottom-level structure on top of `stack`, updating `best`.
 /// Returns whether it accepted a hit.
 #[allow(clippy::too_many_arguments)]
-fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: u32, blas: u32, w2o: &Affine, ray: &Ray, best: &mut Best, first_hit: bool) -> bool {
-    let origin = w2o.point(ray.origin);
-    let dir = w2o.vector(ray.direction);
-    let boxes = BoxRay::new(origin, dir);
+fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: u32, blas: u32, local: &(BoxRay, ShearedRay), ray: &Ray, best: &mut Best, first_hit: bool) -> bool {
+    let (boxes, sheared) = (&local.0, &local.1);
     let flags = ray.flags;
     let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
     let flip = iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING);
@@ -208,7 +215,6 @@ fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: 
         let (g, _) = view.locate(id);
         opacity_culled(resolve_opacity(view, g, inst, flags), flags)
     };
-    let sheared = ShearedRay::new(origin, dir);
     let base = stack.len();
     stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
     let mut found = false;
@@ -218,7 +224,7 @@ fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: 
             continue;
         }
         if e.child & LEAF_BIT == 0 {
-            push_children(stack, view.nodes, e.child, &boxes, ray.t_min, best.t);
+            push_children(stack, view.nodes, e.child, boxes, ray.t_min, best.t);
             continue;
         }
         let first = e.child & !LEAF_BIT;
