@@ -21,10 +21,6 @@ const PRESETS: [vk::BuildAccelerationStructureFlagsKHR; 4] = [
 /// this is how near.
 const AABB_EPS: f64 = 1e-5;
 
-fn close(a: f64, b: f64) -> bool {
-    (a - b).abs() <= AABB_EPS * (1.0 + a.abs().max(b.abs()))
-}
-
 /// Checks the committed closest hit and the candidate set of `rays` rays against the oracle.
 fn check_scene(seed: u64, desc: &SceneDesc, rays: usize, r: &mut Rand) -> Result<(), TestCaseError> {
     let device = Device::new();
