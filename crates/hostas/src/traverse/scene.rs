@@ -198,11 +198,8 @@ impl Scene {
         let mut q = RayQuery::new(self, ray)?;
         while q.proceed() {
             match q.candidate_type() {
-                Some(super::CandidateType::Triangle) => {
-                    if any_hit(&q) {
-                        q.confirm_intersection()?;
-                    }
-                }
+                Some(super::CandidateType::Triangle) if any_hit(&q) => q.confirm_intersection()?,
+                Some(super::CandidateType::Triangle) => {}
                 Some(super::CandidateType::Aabb) => {
                     if let Some(t) = intersect(&q) {
                         // Outside the allowed range the hit is dropped, as a shader's would be.

@@ -100,7 +100,7 @@ impl<'s> Tracer<'s> {
                 continue;
             }
             if e.child & LEAF_BIT == 0 {
-                push_children(&mut stack, &tlas.nodes, e.child, &world, ray.t_min, best.t);
+                push_children(&mut stack, tlas.nodes, e.child, &world, ray.t_min, best.t);
                 continue;
             }
             let first = e.child & !LEAF_BIT;
