@@ -1,8 +1,9 @@
 //! Fuzzing, kept green by CI: every file of `fuzz/corpus/<target>/` and
 //! `fuzz/regressions/<target>/` goes through the same checks as the cargo-fuzz target of that
-//! name (the checks are compiled in from `fuzz/src/checks/`), and minimized reproductions of
-//! the bugs the fuzzers found are pinned below (ignored while the bug is open: run them with
-//! `cargo test -p hostas --test fuzz_regressions -- --ignored`). See `fuzz/README.md`.
+//! name (the checks are compiled in from `fuzz/src/checks/`); serialized structures made by
+//! this build, and deterministic corruptions of them, go through the `deserialize` checks; and
+//! minimized reproductions of the bugs found while fuzzing are pinned below (a new one stays
+//! `#[ignore = "BUG: ..."]` while it is open). See `fuzz/README.md`.
 
 #[path = "../../../fuzz/src/checks/mod.rs"]
 mod checks;
@@ -59,6 +60,25 @@ fn regressions_pass_the_fuzz_checks() {
     eprintln!("replayed {n} regression files");
 }
 
+/// Structures serialized by this build (whatever the layout version), and deterministic
+/// corruptions of them, pass the `deserialize` checks.
+#[test]
+fn fresh_serialized_structures_pass_the_deserialize_checks() {
+    let mut failures = Vec::new();
+    for (i, (name, bytes)) in checks::seeds::deserialize_seeds().into_iter().enumerate() {
+        let header = SerializedHeader::parse(&bytes).expect("a seed parses");
+        assert_eq!(header.serialized_size, bytes.len() as u64, "{name}");
+        assert!(Device::new().deserialize(&bytes).is_ok(), "{name} deserializes");
+        let inputs = std::iter::once(bytes.clone()).chain(checks::seeds::mutations(&bytes, 400, i as u64));
+        for (k, input) in inputs.enumerate() {
+            if std::panic::catch_unwind(|| checks::deserialize::run(&input)).is_err() {
+                failures.push(format!("{name} mutation {k}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "deserialize checks failed for: {failures:?}");
+}
+
 /// The decoder is deterministic and total: any bytes decode, the same bytes the same way.
 #[test]
 fn build_inputs_decoding_is_deterministic() {
@@ -81,16 +101,12 @@ fn bare_header(deserialized_size: u64) -> Vec<u8> {
     bytes
 }
 
-/// BUG: `Device::deserialize` (crates/hostas/src/commands/copy.rs, `deserialize`) creates the
+/// Was a bug (fixed in 74ed721): `Device::deserialize` (crates/hostas/src/commands/copy.rs) created the
 /// destination with the header's `deserializedSize` before `copy_memory_to_acceleration_structure`
-/// checks that the data holds that many bytes. A 56-byte input can thus make hostas allocate
-/// and zero any amount of memory (8 GiB for `deserializedSize = 2^33`: an OOM kill under a
-/// memory limit); past what the allocator grants, the error is `OutOfHostMemory` instead of
-/// "the data is too short". Fix: check `56 + 8 * handles + deserializedSize <= min(bytes.len(),
-/// serializedSize)` (or run the whole validation of `copy_memory_to_acceleration_structure`)
-/// before creating the destination.
+/// checked that the data holds that many bytes: a 56-byte input could make hostas allocate and
+/// zero any amount of memory (8 GiB for `deserializedSize = 2^33`), and past what the allocator
+/// grants, the error was `OutOfHostMemory` instead of "the data is too short".
 #[test]
-#[ignore = "BUG: Device::deserialize allocates deserializedSize bytes before checking the input holds them"]
 fn deserialize_allocates_before_validating() {
     // 2^62 bytes cannot be allocated anywhere, so this shows the order of the checks without
     // allocating: the input is too short, whatever the size it claims.
@@ -117,16 +133,13 @@ fn finishes_within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + S
     rx.recv_timeout(limit).unwrap_or_else(|_| panic!("did not finish within {limit:?}"))
 }
 
-/// BUG (hang): `build_acceleration_structures` (crates/hostas/src/commands/build.rs, the
-/// cross-info loop "Instances may not reference any destination of this call") walks
-/// `0..primitiveCount` of every instance geometry, skipping instances that fail to read
-/// (`let Ok(inst) = reader.instance(p) else { continue }`), before any count is validated
-/// against `maxInstanceCount`. primitiveCount = 2^32 - 1 over an empty instance buffer is
-/// 4 billion failed reads (tens of seconds optimized, minutes in debug) before the call
-/// returns an error. Fix: validate the counts (`validate::counts`) before that loop, or stop
-/// at the first instance that cannot be read (`break` instead of `continue`).
+/// Was a bug (hang, fixed in 74ed721): `build_acceleration_structures`
+/// (crates/hostas/src/commands/build.rs, the cross-info scan "Instances may not reference any
+/// destination of this call") walked `0..primitiveCount` of every instance geometry, skipping
+/// instances that failed to read, before any count was checked against `maxInstanceCount`:
+/// primitiveCount = 2^32 - 1 over an empty instance buffer took more than 5 s with the test
+/// profile (optimized builds could drop the empty loop) before the call returned an error.
 #[test]
-#[ignore = "BUG: a huge instance primitiveCount makes build_acceleration_structures loop ~2^32 times before failing"]
 fn huge_instance_count_hangs_the_reference_check() {
     let r = finishes_within(Duration::from_secs(5), || {
         let device = Device::new();
@@ -154,15 +167,12 @@ fn aabb_blas(device: &Device, boxes_per_geometry: usize, geometries: usize, spre
     (a, boxes)
 }
 
-/// BUG (overflow panic with overflow checks, as in `cargo test` and `cargo fuzz`): an UPDATE
-/// sums its ranges' primitive counts in u32 in `Device::geometry_records`
-/// (crates/hostas/src/commands/build.rs, `first += r.primitive_count`) before anything checks
-/// them: `update_one` never calls `validate::counts`, and the per-geometry comparison with the
-/// source (`check_update_geometries`) comes after. Two AABB geometries of 2^31 primitives each
-/// overflow (release builds wrap silently and then reject the update). Fix: call
-/// `validate::counts` in `update_one` before `geometry_records`, or sum in u64 there.
+/// Was a bug (overflow panic with overflow checks, fixed in 74ed721): an UPDATE summed its
+/// ranges' primitive counts in u32 in `Device::geometry_records`
+/// (crates/hostas/src/commands/build.rs, `first += r.primitive_count`) before anything checked
+/// them (`update_one` did not call `validate::counts`): two AABB geometries of 2^31 primitives
+/// each panicked with "attempt to add with overflow".
 #[test]
-#[ignore = "BUG: UPDATE with primitive counts summing past u32::MAX overflows in geometry_records"]
 fn update_with_huge_counts_overflows() {
     let device = Device::new();
     let (a, boxes) = aabb_blas(&device, 4, 2, 1.0, Default::default());
@@ -184,19 +194,15 @@ fn update_with_huge_counts_overflows() {
     assert!(matches!(r, Ok(Err(_))), "the update must fail with an error, not a panic");
 }
 
-/// BUG: deserialization (and `View::parse`) accept geometry records whose `geometry_type`
-/// disagrees with the structure's primitive kind, and UPDATE takes the primitive kind from the
-/// new inputs (`validate::info`) rather than from the source. A serialized AABB BLAS whose
-/// record says TRIANGLES (one u32, plus a supported vertexFormat) deserializes, and an update
-/// with matching triangle inputs passes `check_update_geometries`, then `refit` slices the
-/// primitive section as 36-byte triangles where 24-byte boxes are stored:
-/// `&mut bytes[h.prims_offset .. h.prims_offset + 36 * n]` runs past the structure
-/// (crates/hostas/src/commands/build.rs, `refit`: panic "range end index ... out of range"),
-/// or, when it fits, overwrites the primitive-id and node sections. Fix: in `View::parse`,
-/// reject geometry records whose type does not match `prim_kind` (and unknown formats/index
-/// types), and in `update_one`, require `src_header.prim_kind == prim_kind`.
+/// Was a bug (panic, fixed in 74ed721): deserialization (`View::parse`) accepted geometry
+/// records whose `geometry_type` disagreed with the structure's primitive kind, and UPDATE takes
+/// the primitive kind from the new inputs. A serialized AABB BLAS whose record said TRIANGLES
+/// (one u32, plus a supported vertexFormat) deserialized; an update with matching triangle
+/// inputs passed `check_update_geometries`, then `refit` sliced the primitive section as 36-byte
+/// triangles where 24-byte boxes are stored (crates/hostas/src/commands/build.rs, `refit`:
+/// "range end index 2480 out of range for slice of length 2304"), or, when it fit, overwrote
+/// the primitive-id and node sections (then "index out of bounds" in the node refit loop).
 #[test]
-#[ignore = "BUG: update of a deserialized structure whose geometry records disagree with its primitive kind panics in refit"]
 fn update_refits_with_the_new_geometry_type() {
     let device = Device::new();
     // 60 identical boxes, LOW_MEMORY: leaves of 15 under two nodes, so the structure ends
@@ -245,17 +251,13 @@ fn update_refits_with_the_new_geometry_type() {
     assert!(matches!(r, Ok(Err(_))), "the update must be refused (source holds AABBs): {r:?}");
 }
 
-/// BUG (unbounded allocation): a top-level structure's handle list is sized from its header's
-/// `primitive_count` (crates/hostas/src/commands/copy.rs, `handle_list`: `vec![0u64;
-/// primitive_count]`), and `View::parse` accepts any count up to 2^32 - 1 as long as the
-/// geometry counts add up and nothing is stored. Memory the application wrote through
-/// `Buffer::write` (which `View::parse` is documented to withstand) can therefore make a
-/// SERIALIZATION_SIZE query or `serialize` allocate up to 32 GiB (an abort when the allocator
-/// refuses, an OOM kill when `serialize` then writes it). Fix: `View::parse` rejects counts past
-/// the device limits (top level: `maxInstanceCount` = 2^24 - 1; bottom level:
-/// `maxPrimitiveCount`, `maxGeometryCount`).
+/// Was a bug (unbounded allocation, fixed in 74ed721): a top-level structure's handle list is
+/// sized from its header's `primitive_count` (crates/hostas/src/commands/copy.rs,
+/// `handle_list`), and `View::parse` accepted any count up to 2^32 - 1 as long as the geometry
+/// counts added up and nothing was stored. Memory the application wrote through `Buffer::write`
+/// (which `View::parse` is documented to withstand) could make a SERIALIZATION_SIZE query or
+/// `serialize` allocate up to 32 GiB. `View::parse` now rejects counts past the device limits.
 #[test]
-#[ignore = "BUG: View::parse accepts a TLAS with more instances than maxInstanceCount; its handle list is allocated from that count"]
 fn serialization_size_of_scribbled_tlas() {
     let device = Device::new();
     let blas = hostas::quick::build_triangle_blas(&device, &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[[0, 1, 2]], Default::default()).unwrap();
@@ -268,23 +270,19 @@ fn serialization_size_of_scribbled_tlas() {
     buffer.read(offset + 88, &mut geometries_offset).unwrap();
     let geometries_offset = u64::from_le_bytes(geometries_offset);
     buffer.write(offset + geometries_offset + 4, &count.to_le_bytes()).unwrap(); // GeometryRecord::primitive_count
-    assert!(device.statistics(tlas).is_ok(), "the scribbled structure parses (the premise of this test)");
     let size = device.acceleration_structure_property(tlas, vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR);
     assert!(size.is_err(), "a TLAS claiming {count} instances (> maxInstanceCount) was accepted: serialization size {size:?}");
+    assert!(device.serialize(tlas).is_err());
+    assert!(device.statistics(tlas).is_err());
 }
 
-/// BUG: a ray with a zero direction and tMax = +inf is reported to hit boxes that do not contain
-/// its origin, at t = +inf. With a zero direction every slab the origin lies below of gives an
-/// entry and an exit at +inf (`(lo - o) * (1 / 0)`), and `BoxRay::aabb`
-/// (crates/hostas/src/traverse/query.rs) accepts `near <= min(far, tMax)`, here `inf <= inf`.
-/// The node test already treats an entry at +inf as a miss (its sentinel), so the box is
-/// reached when a node whose bounds contain the origin leads to its leaf. `trace_closest` then
-/// commits a generated hit at t = +inf, and a ray query offers the candidate; the oracle (and
-/// the spec: every point of this ray is its origin) sees no intersection. Found by the
-/// `ray_query` target. Fix: in `BoxRay::aabb`, also require `near < f32::INFINITY`, as the
-/// node test does.
+/// Was a bug (found by the `ray_query` target, fixed in 74ed721): a ray with a zero direction
+/// and tMax = +inf was reported to hit boxes that do not contain its origin, at t = +inf. Every
+/// slab the origin lies below of gives an entry and an exit at +inf (`(lo - o) * (1 / 0)`), and
+/// `BoxRay::aabb` (crates/hostas/src/traverse/query.rs) accepted `near <= min(far, tMax)`, here
+/// `inf <= inf`, when a node whose bounds contain the origin led to the box's leaf:
+/// `trace_closest` committed a generated hit at t = +inf and a ray query offered the candidate.
 #[test]
-#[ignore = "BUG: zero-direction rays with tMax = inf get AABB candidates at t = inf for boxes away from the origin"]
 fn zero_direction_ray_hits_boxes_at_infinity() {
     let device = Device::new();
     // A box the origin is below of in z, and a second box under the origin, so that the node
