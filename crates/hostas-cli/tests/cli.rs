@@ -462,17 +462,11 @@ fn bench_json_lines() {
         table.contains("ring") && table.contains("fast-build") && table.contains("primary Mrays/s"),
         "{table}"
     );
-    // Built-in scenes only, saying that ../shared/meshes is absent.
-    let o = f.run(&[
-        "bench",
-        "--reps",
-        "1",
-        "--rays",
-        "64",
-        "--presets",
-        "fast-build",
-        "--json",
-    ]);
+    // Built-in scenes only, saying that ../shared/meshes is absent. Run from a nested folder
+    // so that `..` is inside the fixture, whatever the system's temporary directory holds.
+    let nested = f.path("work/here");
+    std::fs::create_dir_all(&nested).unwrap();
+    let o = hostas(&["bench", "--reps", "1", "--rays", "64", "--presets", "fast-build", "--json"], &nested);
     let out = ok(&o);
     assert_eq!(out.lines().count(), 2, "{out}");
     assert!(stderr(&o).contains("absent"), "{}", stderr(&o));
