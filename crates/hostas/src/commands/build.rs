@@ -329,8 +329,7 @@ impl Device {
         let Scratch { refs, aux, keys, keys_tmp, data } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
 
         // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
-        let mut active = vec![false; 0];
-        match prim_kind {
+        let stored = match prim_kind {
             PrimKind::Instances => {
                 let Some(Reader::Instances(r)) = readers.first() else { return Err(Error::NotSupported("instances without a reader".into())) };
                 let out: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(data).map_err(|e| Error::NotSupported(format!("scratch carve: {e}")))?;
@@ -346,15 +345,11 @@ impl Device {
                     refs[stored] = PrimRef::new(&bounds, i);
                     stored += 1;
                 }
-                active.resize(stored, true);
+                stored
             }
-            PrimKind::Triangles | PrimKind::Aabbs => {
-                let stored = decode_geometries(&readers, &records, refs, data)?;
-                active.resize(stored, true);
-            }
-            PrimKind::None => {}
-        }
-        let stored = active.len();
+            PrimKind::Triangles | PrimKind::Aabbs => decode_geometries(&readers, &records, refs, data)?,
+            PrimKind::None => 0,
+        };
         let preset = Preset::from_flags(flags);
         let refs = &mut refs[..stored];
         let tree = build::build(&preset, refs, &mut aux[..stored], &mut keys[..stored], &mut keys_tmp[..stored]);
@@ -465,12 +460,9 @@ struct Scratch<'s> {
 fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scratch<'_>> {
     let misalign = scratch.as_ptr().align_offset(64).min(scratch.len());
     let s = &mut scratch[misalign..];
-    let carve = |s: &mut [u8], bytes: usize| -> Result<(usize, usize)> {
-        let _ = s;
-        Ok((bytes.div_ceil(64) * 64, bytes))
-    };
-    let (r_len, _) = carve(s, 32 * n)?;
-    let (k_len, _) = carve(s, 8 * n)?;
+    // Each array starts on a 64-byte boundary.
+    let r_len = (32 * n).div_ceil(64) * 64;
+    let k_len = (8 * n).div_ceil(64) * 64;
     if s.len() < 2 * r_len + 2 * k_len + prim_size * n {
         return Err(Error::RangeTooShort { what: "scratch", needed: (2 * r_len + 2 * k_len + prim_size * n) as u64, available: s.len() as u64, location: Location::NONE });
     }

@@ -436,7 +436,7 @@ impl<'s> RayQuery<'s> {
         if !matches!(i.kind, Kind::Triangle) {
             return Err(none());
         }
-        let inst = self.instance_of(i).ok_or_else(none)?;
+        self.instance_of(i).ok_or_else(none)?;
         let view = self.scene.blas_view_for(i.instance_slot).ok_or_else(none)?;
         if view.header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw() == 0 {
             return Err(Error::vuid(
@@ -445,7 +445,6 @@ impl<'s> RayQuery<'s> {
                 "the bottom-level structure was not built with ALLOW_DATA_ACCESS",
             ));
         }
-        let _ = inst;
         let t = view.triangles.get(i.prim_slot as usize).ok_or_else(none)?;
         Ok([[t[0], t[1], t[2]], [t[3], t[4], t[5]], [t[6], t[7], t[8]]])
     }
