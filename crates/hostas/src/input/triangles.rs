@@ -224,31 +224,33 @@ impl<'a> TriangleReader<'a> {
             return None;
         }
         let base = 3 * i as usize;
+        let fv = self.first_vertex as usize;
+        let u32_at = |b: &[u8], k: usize| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
         let idx: [usize; 3] = match self.index_size {
-            0 => [base, base + 1, base + 2].map(|v| v + self.first_vertex as usize),
+            0 => [base + fv, base + 1 + fv, base + 2 + fv],
             4 => {
                 let at = self.primitive_offset as usize + base * 4;
-                let b = self.data.index_data?.get(at..at + 12)?;
-                [0, 4, 8].map(|k| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]) as usize + self.first_vertex as usize)
+                let b: &[u8; 12] = self.data.index_data?.get(at..at + 12)?.try_into().ok()?;
+                [u32_at(b, 0) as usize + fv, u32_at(b, 4) as usize + fv, u32_at(b, 8) as usize + fv]
             }
             _ => {
                 let at = self.primitive_offset as usize + base * 2;
-                let b = self.data.index_data?.get(at..at + 6)?;
-                [0, 2, 4].map(|k| u16::from_le_bytes([b[k], b[k + 1]]) as usize + self.first_vertex as usize)
+                let b: &[u8; 6] = self.data.index_data?.get(at..at + 6)?.try_into().ok()?;
+                [u16::from_le_bytes([b[0], b[1]]) as usize + fv, u16::from_le_bytes([b[2], b[3]]) as usize + fv, u16::from_le_bytes([b[4], b[5]]) as usize + fv]
             }
         };
+        if idx[0].max(idx[1]).max(idx[2]) > self.data.max_vertex as usize {
+            return None;
+        }
         let start = if self.index_size == 0 { self.primitive_offset as usize } else { 0 };
         let stride = self.data.vertex_stride as usize;
         let mut out = [0f32; 9];
         for k in 0..3 {
-            if idx[k] > self.data.max_vertex as usize {
-                return None;
-            }
             let at = start + idx[k] * stride;
-            let b = self.data.vertex_data.get(at..at + 12)?;
-            for c in 0..3 {
-                out[3 * k + c] = f32::from_le_bytes([b[4 * c], b[4 * c + 1], b[4 * c + 2], b[4 * c + 3]]);
-            }
+            let b: &[u8; 12] = self.data.vertex_data.get(at..at + 12)?.try_into().ok()?;
+            out[3 * k] = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+            out[3 * k + 1] = f32::from_le_bytes([b[4], b[5], b[6], b[7]]);
+            out[3 * k + 2] = f32::from_le_bytes([b[8], b[9], b[10], b[11]]);
         }
         if let Some(t) = &self.transform {
             if !(out[0].is_nan() || out[3].is_nan() || out[6].is_nan()) {

@@ -145,13 +145,21 @@ impl Writer {
                 None => Ok((0.0, depth)),
             }
         };
-        let results: Vec<Result<(f32, u32)>> =
-            if inner.nodes > PARALLEL_NODES { jobs.into_par_iter().map(run).collect() } else { jobs.into_iter().map(run).collect() };
         let mut max_depth = depth;
-        for r in results {
-            let (s, d) = r?;
-            sah += s;
-            max_depth = max_depth.max(d);
+        if inner.nodes > PARALLEL_NODES {
+            let results: Vec<Result<(f32, u32)>> = jobs.into_par_iter().map(run).collect();
+            for r in results {
+                let (s, d) = r?;
+                sah += s;
+                max_depth = max_depth.max(d);
+            }
+        } else {
+            // Small subtrees: no collection (this runs once per node).
+            for j in jobs {
+                let (s, d) = run(j)?;
+                sah += s;
+                max_depth = max_depth.max(d);
+            }
         }
         Ok((sah, max_depth))
     }
