@@ -1,4 +1,4 @@
-//! The builders' output: a 4-wide tree over positions in the final primitive order. Builders
+//! The builders' output: an 8-wide tree over positions in the final primitive order. Builders
 //! know geometry, not bytes; `layout::encode` turns this into bytes.
 
 use crate::layout::WIDTH;
