@@ -630,12 +630,10 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
                     }
                 }
             }
-            let results: Vec<Result<()>> = prims
-                .par_chunks_mut(size)
-                .zip(bounds.par_iter_mut())
-                .zip(ids.par_iter())
-                .with_min_len(1024)
-                .map(|((out, b), &id)| {
+            // One result per chunk (the first error in it), so the error reported is the first
+            // in primitive order whatever the thread count.
+            const CHUNK: usize = 2048;
+            let one = |out: &mut [u8], b: &mut Aabb, id: u32| -> Result<()> {
                     let (g, p) = locate(id);
                     let at = at.geometry(g).primitive(p);
                     let inactive = || Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at, "an active primitive became inactive in an update");
@@ -660,6 +658,16 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
                             *b = bb;
                         }
                         Reader::Instances(_) => {}
+                    }
+                    Ok(())
+            };
+            let results: Vec<Result<()>> = prims
+                .par_chunks_mut(size * CHUNK)
+                .zip(bounds.par_chunks_mut(CHUNK))
+                .zip(ids.par_chunks(CHUNK))
+                .map(|((out, b), ids)| {
+                    for ((o, bb), &id) in out.chunks_exact_mut(size).zip(b.iter_mut()).zip(ids) {
+                        one(o, bb, id)?;
                     }
                     Ok(())
                 })
