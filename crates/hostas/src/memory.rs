@@ -17,23 +17,22 @@ pub(crate) struct Block([u8; 64]);
 
 /// Bound host memory.
 pub struct HostMemory {
-    blocks: Vec<Block>,
+    blocks: Box<[Block]>,
     len: usize,
 }
 
 /// A 64-byte aligned copy of `bytes` (for validating untrusted data as typed sections).
 pub(crate) fn aligned_copy(bytes: &[u8]) -> Vec<Block> {
-    let mut blocks = vec![Block([0; 64]); bytes.len().div_ceil(64)];
+    let mut blocks = bytemuck::allocation::zeroed_vec::<Block>(bytes.len().div_ceil(64));
     bytemuck::cast_slice_mut::<Block, u8>(&mut blocks)[..bytes.len()].copy_from_slice(bytes);
     blocks
 }
 
 impl HostMemory {
     fn new(len: usize) -> Result<HostMemory> {
-        let n = len.div_ceil(64);
-        let mut blocks = Vec::new();
-        blocks.try_reserve_exact(n).map_err(|e| Error::OutOfHostMemory(format!("{len} bytes: {e}")))?;
-        blocks.resize(n, Block([0; 64]));
+        // Zeroed by the allocator (fresh pages from the OS are zero already), not by a memset.
+        let blocks = bytemuck::allocation::try_zeroed_slice_box::<Block>(len.div_ceil(64))
+            .map_err(|()| Error::OutOfHostMemory(format!("{len} bytes could not be allocated")))?;
         Ok(HostMemory { blocks, len })
     }
     pub fn bytes(&self) -> &[u8] {
