@@ -19,7 +19,9 @@ fn find_header() -> PathBuf {
     }
     for home in homes {
         let src = home.join("registry").join("src");
-        let Ok(entries) = std::fs::read_dir(&src) else { continue };
+        let Ok(entries) = std::fs::read_dir(&src) else {
+            continue;
+        };
         for e in entries.flatten() {
             let cand = e.path().join(TINYBVH_RS_DIR).join("ffi/tinybvh/tiny_bvh.h");
             if cand.exists() {

@@ -33,15 +33,25 @@ fn main() {
     while want.iter().any(|(_, n)| *n > 0) && tries < 200_000 {
         tries += 1;
         let len = 16 + (lcg % 400) as usize;
-        let bytes: Vec<u8> = (0..len).map(|_| {
-            lcg ^= lcg << 13;
-            lcg ^= lcg >> 7;
-            lcg ^= lcg << 17;
-            (lcg >> 24) as u8
-        }).collect();
+        let bytes: Vec<u8> = (0..len)
+            .map(|_| {
+                lcg ^= lcg << 13;
+                lcg ^= lcg >> 7;
+                lcg ^= lcg << 17;
+                (lcg >> 24) as u8
+            })
+            .collect();
         let case = Case::decode(&bytes);
         let out = run_case(&case);
-        let kind = if out.updated > 0 { 2 } else if out.built_tlas > 0 { 1 } else if out.built_blas > 0 { 0 } else { continue };
+        let kind = if out.updated > 0 {
+            2
+        } else if out.built_tlas > 0 {
+            1
+        } else if out.built_blas > 0 {
+            0
+        } else {
+            continue;
+        };
         if want[kind].1 > 0 {
             want[kind].1 -= 1;
             write(&dir, &format!("{}-{}", want[kind].0, want[kind].1), &bytes);

@@ -15,7 +15,13 @@ fn files(paths: &[PathBuf]) -> Vec<PathBuf> {
     let mut out = Vec::new();
     for p in paths {
         if p.is_dir() {
-            let mut v: Vec<PathBuf> = std::fs::read_dir(p).map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_file()).collect()).unwrap_or_default();
+            let mut v: Vec<PathBuf> = std::fs::read_dir(p)
+                .map(|d| {
+                    d.filter_map(|e| e.ok().map(|e| e.path()))
+                        .filter(|p| p.is_file())
+                        .collect()
+                })
+                .unwrap_or_default();
             v.sort();
             out.extend(v);
         } else if p.is_file() {
@@ -68,7 +74,16 @@ fn mutate(r: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
             }
             2 if b.len() >= 4 => {
                 let i = r.below(b.len() - 3);
-                let v: u32 = [0, 1, u32::MAX, 0x8000_0000, 0x7fff_ffff, 64, 256, r.next() as u32][r.below(8)];
+                let v: u32 = [
+                    0,
+                    1,
+                    u32::MAX,
+                    0x8000_0000,
+                    0x7fff_ffff,
+                    64,
+                    256,
+                    r.next() as u32,
+                ][r.below(8)];
                 b[i..i + 4].copy_from_slice(&v.to_le_bytes());
             }
             3 if b.len() >= 8 => {
@@ -102,10 +117,21 @@ fn mutate(r: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
 pub fn main(target: &str, f: fn(&[u8])) {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if let Some(pos) = args.iter().position(|a| a == "--random") {
-        let secs: f64 = args.get(pos + 1).and_then(|s| s.parse().ok()).unwrap_or(60.0);
+        let secs: f64 = args
+            .get(pos + 1)
+            .and_then(|s| s.parse().ok())
+            .unwrap_or(60.0);
         let seed: u64 = args.get(pos + 2).and_then(|s| s.parse().ok()).unwrap_or(1);
-        let paths: Vec<PathBuf> = args.iter().enumerate().filter(|(i, _)| *i < pos || *i > pos + 2).map(|(_, a)| PathBuf::from(a)).collect();
-        let seeds: Vec<Vec<u8>> = files(&paths).iter().filter_map(|p| std::fs::read(p).ok()).collect();
+        let paths: Vec<PathBuf> = args
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| *i < pos || *i > pos + 2)
+            .map(|(_, a)| PathBuf::from(a))
+            .collect();
+        let seeds: Vec<Vec<u8>> = files(&paths)
+            .iter()
+            .filter_map(|p| std::fs::read(p).ok())
+            .collect();
         let mut r = Rng(seed);
         let start = Instant::now();
         let mut n = 0u64;
@@ -115,19 +141,30 @@ pub fn main(target: &str, f: fn(&[u8])) {
             let res = std::panic::catch_unwind(|| f(&input));
             n += 1;
             if res.is_err() {
-                let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts").join(target);
+                let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+                    .join("artifacts")
+                    .join(target);
                 let _ = std::fs::create_dir_all(&dir);
                 let path = dir.join(format!("crash-{:016x}", hash(&input)));
                 let _ = std::fs::write(&path, &input);
-                eprintln!("{target}: crash after {n} inputs; input saved to {}", path.display());
+                eprintln!(
+                    "{target}: crash after {n} inputs; input saved to {}",
+                    path.display()
+                );
                 std::process::exit(101);
             }
             if last_report.elapsed() > Duration::from_secs(30) {
-                eprintln!("{target}: {n} inputs, {:.0} s", start.elapsed().as_secs_f64());
+                eprintln!(
+                    "{target}: {n} inputs, {:.0} s",
+                    start.elapsed().as_secs_f64()
+                );
                 last_report = Instant::now();
             }
         }
-        eprintln!("{target}: {n} random inputs in {:.1} s, no crash", start.elapsed().as_secs_f64());
+        eprintln!(
+            "{target}: {n} random inputs in {:.1} s, no crash",
+            start.elapsed().as_secs_f64()
+        );
         return;
     }
     let list = files(&args.iter().map(PathBuf::from).collect::<Vec<_>>());

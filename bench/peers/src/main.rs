@@ -33,13 +33,24 @@ const LIBS: [&str; 4] = ["hostas", "embree", "tinybvh", "obvhs"];
 const CROWN_DEFAULT: &str = "hostas:default,embree:MEDIUM";
 
 #[derive(Parser, Debug)]
-#[command(name = "hostas-peers", about = "hostas vs Embree 3, tinybvh and obvhs: build, SAH, bytes, trace, refit")]
+#[command(
+    name = "hostas-peers",
+    about = "hostas vs Embree 3, tinybvh and obvhs: build, SAH, bytes, trace, refit"
+)]
 struct Args {
     /// Scenes, comma separated: sphere, soup, boxes, bunny, sponza, sibenik, conference, crown.
-    #[arg(long, value_delimiter = ',', default_value = "sphere,soup,boxes,bunny,sponza,sibenik,conference,crown")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "sphere,soup,boxes,bunny,sponza,sibenik,conference,crown"
+    )]
     scenes: Vec<String>,
     /// Libraries, comma separated: hostas, embree, tinybvh, obvhs.
-    #[arg(long, value_delimiter = ',', default_value = "hostas,embree,tinybvh,obvhs")]
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "hostas,embree,tinybvh,obvhs"
+    )]
     libs: Vec<String>,
     /// Restrict to variants, comma separated `lib` or `lib:key` (keys: embree LOW MEDIUM HIGH
     /// refit; tinybvh Build BuildAVX BuildHQ refit; obvhs very_fast medium; hostas fast_build
@@ -130,7 +141,11 @@ fn main() {
     let args = Args::parse();
     let started = Instant::now();
     let all_threads = args.threads.unwrap_or_else(util::available_threads).max(1);
-    let threads = if all_threads > 1 { vec![1, all_threads] } else { vec![1] };
+    let threads = if all_threads > 1 {
+        vec![1, all_threads]
+    } else {
+        vec![1]
+    };
     for l in &args.libs {
         if !LIBS.contains(&l.as_str()) {
             eprintln!("unknown library '{l}' (known: {})", LIBS.join(", "));
@@ -155,7 +170,9 @@ fn main() {
         if let Some(dir) = p.parent() {
             let _ = std::fs::create_dir_all(dir);
         }
-        std::io::BufWriter::new(std::fs::File::create(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())))
+        std::io::BufWriter::new(
+            std::fs::File::create(p).unwrap_or_else(|e| panic!("{}: {e}", p.display())),
+        )
     });
 
     println!("# hostas vs peers\n");
@@ -180,7 +197,11 @@ fn main() {
         "SAH(1,1) = sum over interior nodes of A/A(root) x C_trav + sum over leaves of A/A(root) x N x C_isect, with C_trav = C_isect = 1, on each library's binary tree (Embree: rtcBuildBVH proxy; hostas: the value hostas reports). B/tri = bytes of the traced structure / triangles. Mesh loader: {}. Mesh folder: {}{}",
         mesh::LOADER,
         mesh_dir.display(),
-        if mesh_dir.exists() { "" } else { " (ABSENT: real-mesh scenes are skipped)" }
+        if mesh_dir.exists() {
+            ""
+        } else {
+            " (ABSENT: real-mesh scenes are skipped)"
+        }
     );
 
     for name in &args.scenes {
@@ -217,7 +238,13 @@ fn main() {
         let load_start = util::loadavg();
         let load_s = t_scene.elapsed().as_secs_f64();
         let rays = rays::generate(&sc, args.rays);
-        eprintln!("[{:6.1}s] scene {} ({} tris, loaded in {:.1}s)", started.elapsed().as_secs_f64(), sc.name, sc.tri_count(), load_s);
+        eprintln!(
+            "[{:6.1}s] scene {} ({} tris, loaded in {:.1}s)",
+            started.elapsed().as_secs_f64(),
+            sc.name,
+            sc.tri_count(),
+            load_s
+        );
         let mut rows = Vec::new();
         type RunFn = fn(&scene::Scene, &rays::RaySet, &Cfg) -> Vec<report::Row>;
         let libs: [(&str, RunFn); 4] = [
@@ -253,8 +280,14 @@ fn main() {
             seconds: 0.0,
         };
         if let (Some(a), Some(b)) = (load_start, util::loadavg()) {
-            let busy = if a.max(b) > all_threads as f64 + 0.5 { " (the machine was busy with other work: expect depressed, noisy figures, the all-thread ones first)" } else { "" };
-            rep.notes.push(format!("1-minute load average at scene start / end: {a:.2} / {b:.2}{busy}"));
+            let busy = if a.max(b) > all_threads as f64 + 0.5 {
+                " (the machine was busy with other work: expect depressed, noisy figures, the all-thread ones first)"
+            } else {
+                ""
+            };
+            rep.notes.push(format!(
+                "1-minute load average at scene start / end: {a:.2} / {b:.2}{busy}"
+            ));
         }
         rep.finish();
         rep.seconds = t_scene.elapsed().as_secs_f64();
@@ -273,5 +306,8 @@ fn main() {
             }
         }
     }
-    println!("\nTotal wall time: {:.1} s", started.elapsed().as_secs_f64());
+    println!(
+        "\nTotal wall time: {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
 }

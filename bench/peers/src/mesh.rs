@@ -7,4 +7,8 @@ pub use hostas_cli::mesh::load;
 #[cfg(not(feature = "cli-mesh"))]
 pub use crate::meshload_standin::load;
 
-pub const LOADER: &str = if cfg!(feature = "cli-mesh") { "hostas_cli::mesh" } else { "stand-in loader (meshload_standin.rs)" };
+pub const LOADER: &str = if cfg!(feature = "cli-mesh") {
+    "hostas_cli::mesh"
+} else {
+    "stand-in loader (meshload_standin.rs)"
+};

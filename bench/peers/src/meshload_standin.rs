@@ -29,7 +29,11 @@ fn err(s: impl Into<String>) -> MeshError {
 }
 
 pub fn load(path: &Path) -> Result<Mesh, MeshError> {
-    let file_name = path.file_name().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+    let file_name = path
+        .file_name()
+        .and_then(|s| s.to_str())
+        .unwrap_or("mesh")
+        .to_string();
     let (bytes, inner) = if let Some(stripped) = file_name.strip_suffix(".xz") {
         let out = std::process::Command::new("xz")
             .arg("-dc")
@@ -60,7 +64,11 @@ pub fn load(path: &Path) -> Result<Mesh, MeshError> {
             }
         }
     }
-    Ok(Mesh { name, positions, indices })
+    Ok(Mesh {
+        name,
+        positions,
+        indices,
+    })
 }
 
 type Parsed = (Vec<[f32; 3]>, Vec<[u32; 3]>);
@@ -76,7 +84,10 @@ fn parse_obj(bytes: &[u8]) -> Result<Parsed, MeshError> {
             Some("v") => {
                 let mut p = [0f32; 3];
                 for c in &mut p {
-                    *c = it.next().and_then(|s| s.parse().ok()).ok_or_else(|| err("bad OBJ vertex"))?;
+                    *c = it
+                        .next()
+                        .and_then(|s| s.parse().ok())
+                        .ok_or_else(|| err("bad OBJ vertex"))?;
                 }
                 pos.push(p);
             }
@@ -84,7 +95,9 @@ fn parse_obj(bytes: &[u8]) -> Result<Parsed, MeshError> {
                 poly.clear();
                 for tok in it {
                     let first = tok.split('/').next().unwrap_or("");
-                    let i: i64 = first.parse().map_err(|_| err(format!("bad OBJ face index {tok}")))?;
+                    let i: i64 = first
+                        .parse()
+                        .map_err(|_| err(format!("bad OBJ face index {tok}")))?;
                     let i = if i < 0 { pos.len() as i64 + i } else { i - 1 };
                     if i < 0 {
                         return Err(err("OBJ face index out of range"));
@@ -166,13 +179,19 @@ fn parse_ply(bytes: &[u8]) -> Result<Parsed, MeshError> {
         let t: Vec<&str> = line.split_ascii_whitespace().collect();
         match t.as_slice() {
             ["format", f, ..] if *f != "binary_little_endian" => {
-                return Err(err(format!("PLY format {f} not supported by the stand-in loader")));
+                return Err(err(format!(
+                    "PLY format {f} not supported by the stand-in loader"
+                )));
             }
-            ["element", name, n] => {
-                elements.push((name.to_string(), n.parse().map_err(|_| err("PLY count"))?, Vec::new()))
-            }
+            ["element", name, n] => elements.push((
+                name.to_string(),
+                n.parse().map_err(|_| err("PLY count"))?,
+                Vec::new(),
+            )),
             ["property", "list", ct, it, name] => {
-                let e = elements.last_mut().ok_or_else(|| err("PLY property before element"))?;
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err("PLY property before element"))?;
                 e.2.push(Prop::List(
                     name.to_string(),
                     Ty::parse(ct).ok_or_else(|| err("PLY type"))?,
@@ -180,8 +199,13 @@ fn parse_ply(bytes: &[u8]) -> Result<Parsed, MeshError> {
                 ));
             }
             ["property", ty, name] => {
-                let e = elements.last_mut().ok_or_else(|| err("PLY property before element"))?;
-                e.2.push(Prop::Scalar(name.to_string(), Ty::parse(ty).ok_or_else(|| err("PLY type"))?));
+                let e = elements
+                    .last_mut()
+                    .ok_or_else(|| err("PLY property before element"))?;
+                e.2.push(Prop::Scalar(
+                    name.to_string(),
+                    Ty::parse(ty).ok_or_else(|| err("PLY type"))?,
+                ));
             }
             _ => {}
         }
@@ -244,7 +268,9 @@ fn parse_ply(bytes: &[u8]) -> Result<Parsed, MeshError> {
                             let bytes = c * it.size();
                             let items = body.get(..bytes).ok_or_else(short)?;
                             if is_face && (n == "vertex_indices" || n == "vertex_index") {
-                                poly = (0..c).map(|k| it.read(&items[k * it.size()..]) as u32).collect();
+                                poly = (0..c)
+                                    .map(|k| it.read(&items[k * it.size()..]) as u32)
+                                    .collect();
                             }
                             body = &body[bytes..];
                         }

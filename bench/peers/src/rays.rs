@@ -21,7 +21,10 @@ pub struct Hit {
 }
 
 impl Hit {
-    pub const MISS: Hit = Hit { t: f32::INFINITY, prim: u32::MAX };
+    pub const MISS: Hit = Hit {
+        t: f32::INFINITY,
+        prim: u32::MAX,
+    };
     pub fn is_hit(&self) -> bool {
         self.prim != u32::MAX
     }
@@ -57,7 +60,11 @@ fn normalize(v: [f32; 3]) -> [f32; 3] {
 }
 
 fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// `width` x `width` primary rays (scanline order) and as many incoherent rays.
@@ -87,8 +94,14 @@ pub fn generate(scene: &Scene, width: usize) -> RaySet {
     let incoherent = (0..width * width)
         .map(|_| {
             let o = [0, 1, 2].map(|k| rng.range(scene.bmin[k], scene.bmax[k]));
-            Ray { o, d: rng.unit_vector() }
+            Ray {
+                o,
+                d: rng.unit_vector(),
+            }
         })
         .collect();
-    RaySet { primary, incoherent }
+    RaySet {
+        primary,
+        incoherent,
+    }
 }

@@ -52,7 +52,13 @@ pub struct Row {
 
 impl Row {
     pub fn new(library: &'static str, key: &str, variant: &str, class: Option<Class>) -> Row {
-        Row { library, key: key.to_string(), variant: variant.to_string(), class, ..Default::default() }
+        Row {
+            library,
+            key: key.to_string(),
+            variant: variant.to_string(),
+            class,
+            ..Default::default()
+        }
     }
     pub fn name(&self) -> String {
         format!("{}:{}", self.library, self.key)
@@ -96,7 +102,10 @@ pub const SAME_PRIM_ABS: f32 = 1e-5;
 
 /// Compares `other` with `reference`, ray by ray; `diagonal` = scene box diagonal.
 pub fn compare(reference: &[Hit], other: &[Hit], diagonal: f32) -> Check {
-    let mut c = Check { rays: reference.len().min(other.len()), ..Default::default() };
+    let mut c = Check {
+        rays: reference.len().min(other.len()),
+        ..Default::default()
+    };
     for (a, b) in reference.iter().zip(other) {
         c.ref_hits += a.is_hit() as usize;
         c.hits += b.is_hit() as usize;
@@ -158,7 +167,9 @@ impl SceneReport {
         // Reference for the hit cross-check: hostas default preset, else Embree MEDIUM, else
         // the first row with hits.
         let pick = |lib: &str, key: &str| {
-            self.rows.iter().position(|r| r.library == lib && r.key == key && r.hits[0].is_some())
+            self.rows
+                .iter()
+                .position(|r| r.library == lib && r.key == key && r.hits[0].is_some())
         };
         self.reference = pick("hostas", "default")
             .or_else(|| pick("embree", "MEDIUM"))
@@ -169,10 +180,20 @@ impl SceneReport {
                     if let (Some(a), Some(b)) = (&self.rows[ri].hits[k], &r.hits[k]) {
                         let mut shown = 0;
                         for (i, (x, y)) in a.iter().zip(b).enumerate() {
-                            let one = compare(std::slice::from_ref(x), std::slice::from_ref(y), self.diagonal);
+                            let one = compare(
+                                std::slice::from_ref(x),
+                                std::slice::from_ref(y),
+                                self.diagonal,
+                            );
                             if one.true_mismatch > 0 && shown < 5 {
                                 shown += 1;
-                                eprintln!("{} {} kind {k} ray {i}: ref {:?} vs {:?}", self.scene, r.name(), x, y);
+                                eprintln!(
+                                    "{} {} kind {k} ray {i}: ref {:?} vs {:?}",
+                                    self.scene,
+                                    r.name(),
+                                    x,
+                                    y
+                                );
                             }
                         }
                     }
@@ -197,27 +218,50 @@ impl SceneReport {
     }
 
     fn hostas_row(&self, class: Class) -> Option<&Row> {
-        self.rows.iter().find(|r| r.library == "hostas" && r.key == class.hostas_key() && r.error.is_none())
+        self.rows
+            .iter()
+            .find(|r| r.library == "hostas" && r.key == class.hostas_key() && r.error.is_none())
     }
 
     pub fn markdown(&self) -> String {
         let mut s = String::new();
         let tn = *self.threads.last().unwrap_or(&1);
-        s += &format!("\n### `{}` ({} triangles; {})\n\n", self.scene, group(self.tris), self.source);
-        let reference = self.reference.map(|i| self.rows[i].name()).unwrap_or_else(|| "none".into());
+        s += &format!(
+            "\n### `{}` ({} triangles; {})\n\n",
+            self.scene,
+            group(self.tris),
+            self.source
+        );
+        let reference = self
+            .reference
+            .map(|i| self.rows[i].name())
+            .unwrap_or_else(|| "none".into());
         s += &format!(
             "| library | variant | build 1T Mtris/s | build {tn}T Mtris/s | SAH(1,1) | B/tri | primary Mrays/s | incoherent Mrays/s | refit 1T Mtris/s | refit {tn}T Mtris/s | vs {reference}: primary differ (ties/true) | incoherent differ (ties/true) |\n"
         );
         s += "|---|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|\n";
         for (i, r) in self.rows.iter().enumerate() {
             if let Some(e) = &r.error {
-                s += &format!("| {} | {} | error: {} |||||||||||\n", r.library, r.variant, e.replace('|', "/"));
+                s += &format!(
+                    "| {} | {} | error: {} |||||||||||\n",
+                    r.library,
+                    r.variant,
+                    e.replace('|', "/")
+                );
                 continue;
             }
             let b1 = mt(self.tris, r.build_ms.get(&1).copied());
-            let bn = if tn > 1 { mt(self.tris, r.build_ms.get(&tn).copied()) } else { None };
+            let bn = if tn > 1 {
+                mt(self.tris, r.build_ms.get(&tn).copied())
+            } else {
+                None
+            };
             let r1 = mt(self.tris, r.refit_ms.get(&1).copied());
-            let rn = if tn > 1 { mt(self.tris, r.refit_ms.get(&tn).copied()) } else { None };
+            let rn = if tn > 1 {
+                mt(self.tris, r.refit_ms.get(&tn).copied())
+            } else {
+                None
+            };
             let bpt = r.bytes.map(|b| b as f64 / self.tris as f64);
             let chk = |k: usize| match (self.reference, self.checks[i][k]) {
                 (Some(ri), _) if ri == i => "(reference)".to_string(),
@@ -230,7 +274,11 @@ impl SceneReport {
                 r.variant,
                 f(b1, 2),
                 f(bn, 2),
-                if r.sah_wide { format!("{} (8-wide)", f(r.sah, 2)) } else { f(r.sah, 2) },
+                if r.sah_wide {
+                    format!("{} (8-wide)", f(r.sah, 2))
+                } else {
+                    f(r.sah, 2)
+                },
                 f(bpt, 1),
                 f(r.mrays(Kind::Primary), 2),
                 f(r.mrays(Kind::Incoherent), 2),
@@ -247,7 +295,9 @@ impl SceneReport {
                 continue;
             }
             let Some(class) = r.class else { continue };
-            let Some(h) = self.hostas_row(class) else { continue };
+            let Some(h) = self.hostas_row(class) else {
+                continue;
+            };
             let div = |a: Option<f64>, b: Option<f64>| match (a, b) {
                 (Some(a), Some(b)) if b > 0.0 => Some(a / b),
                 _ => None,
@@ -260,7 +310,11 @@ impl SceneReport {
                 r.variant,
                 h.key,
                 f(div(bt(h, 1), bt(r, 1)), 2),
-                if tn > 1 { f(div(bt(h, tn), bt(r, tn)), 2) } else { String::new() },
+                if tn > 1 {
+                    f(div(bt(h, tn), bt(r, tn)), 2)
+                } else {
+                    String::new()
+                },
                 match (h.sah, r.sah) {
                     (Some(_), Some(_)) if h.sah_wide != r.sah_wide => "n/c".to_string(),
                     _ => f(div(h.sah, r.sah), 3),
@@ -269,7 +323,11 @@ impl SceneReport {
                 f(div(h.mrays(Kind::Primary), r.mrays(Kind::Primary)), 2),
                 f(div(h.mrays(Kind::Incoherent), r.mrays(Kind::Incoherent)), 2),
                 f(div(rt(h, 1), rt(r, 1)), 2),
-                if tn > 1 { f(div(rt(h, tn), rt(r, tn)), 2) } else { String::new() },
+                if tn > 1 {
+                    f(div(rt(h, tn), rt(r, tn)), 2)
+                } else {
+                    String::new()
+                },
             );
         }
         if !ratio_rows.is_empty() {
@@ -299,9 +357,12 @@ impl SceneReport {
         let mut out = Vec::new();
         for (i, r) in self.rows.iter().enumerate() {
             let per_t = |m: &BTreeMap<usize, f64>| -> (Value, Value) {
-                let ms: serde_json::Map<String, Value> = m.iter().map(|(t, v)| (t.to_string(), json!(v))).collect();
-                let tp: serde_json::Map<String, Value> =
-                    m.iter().map(|(t, v)| (t.to_string(), json!(self.tris as f64 / (v * 1e3)))).collect();
+                let ms: serde_json::Map<String, Value> =
+                    m.iter().map(|(t, v)| (t.to_string(), json!(v))).collect();
+                let tp: serde_json::Map<String, Value> = m
+                    .iter()
+                    .map(|(t, v)| (t.to_string(), json!(self.tris as f64 / (v * 1e3))))
+                    .collect();
                 (Value::Object(ms), Value::Object(tp))
             };
             let (build_ms, build_mtris) = per_t(&r.build_ms);

@@ -15,7 +15,12 @@ pub struct Scene {
 }
 
 impl Scene {
-    pub fn new(name: &str, source: String, positions: Vec<[f32; 3]>, indices: Vec<[u32; 3]>) -> Scene {
+    pub fn new(
+        name: &str,
+        source: String,
+        positions: Vec<[f32; 3]>,
+        indices: Vec<[u32; 3]>,
+    ) -> Scene {
         let mut bmin = [f32::INFINITY; 3];
         let mut bmax = [f32::NEG_INFINITY; 3];
         // Bounds of the referenced vertices only.
@@ -28,7 +33,14 @@ impl Scene {
                 }
             }
         }
-        Scene { name: name.to_string(), source, positions, indices, bmin, bmax }
+        Scene {
+            name: name.to_string(),
+            source,
+            positions,
+            indices,
+            bmin,
+            bmax,
+        }
     }
     pub fn tri_count(&self) -> usize {
         self.indices.len()
@@ -62,7 +74,11 @@ pub const MESHES: [(&str, &str); 5] = [
 ];
 
 pub fn all_scene_names() -> Vec<&'static str> {
-    GENERATED.iter().copied().chain(MESHES.iter().map(|m| m.0)).collect()
+    GENERATED
+        .iter()
+        .copied()
+        .chain(MESHES.iter().map(|m| m.0))
+        .collect()
 }
 
 /// The shared mesh folder: `--meshes`, else `../../../shared/meshes` relative to this crate
@@ -83,7 +99,10 @@ pub fn load(name: &str, mesh_dir: &Path) -> Result<Loaded, String> {
         "boxes" => Ok(Loaded::Scene(boxes(83_333))),
         _ => {
             let Some((_, file)) = MESHES.iter().find(|m| m.0 == name) else {
-                return Err(format!("unknown scene '{name}' (known: {})", all_scene_names().join(", ")));
+                return Err(format!(
+                    "unknown scene '{name}' (known: {})",
+                    all_scene_names().join(", ")
+                ));
             };
             let path = mesh_dir.join(file);
             if !path.exists() {
@@ -94,7 +113,12 @@ pub fn load(name: &str, mesh_dir: &Path) -> Result<Loaded, String> {
                 )));
             }
             let mesh = crate::mesh::load(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-            Ok(Loaded::Scene(Scene::new(name, path.display().to_string(), mesh.positions, mesh.indices)))
+            Ok(Loaded::Scene(Scene::new(
+                name,
+                path.display().to_string(),
+                mesh.positions,
+                mesh.indices,
+            )))
         }
     }
 }
@@ -133,7 +157,12 @@ pub fn sphere(n: u32) -> Scene {
             }
         }
     }
-    Scene::new("sphere", format!("cube-sphere, radius 1, 6 x {n}^2 quads"), pos, idx)
+    Scene::new(
+        "sphere",
+        format!("cube-sphere, radius 1, 6 x {n}^2 quads"),
+        pos,
+        idx,
+    )
 }
 
 /// `count` random triangles: centre uniform in [0,100]^3, each vertex within +-1 of it per axis.
@@ -142,14 +171,23 @@ pub fn soup(count: usize) -> Scene {
     let mut pos = Vec::with_capacity(count * 3);
     let mut idx = Vec::with_capacity(count);
     for t in 0..count {
-        let c = [rng.range(0.0, 100.0), rng.range(0.0, 100.0), rng.range(0.0, 100.0)];
+        let c = [
+            rng.range(0.0, 100.0),
+            rng.range(0.0, 100.0),
+            rng.range(0.0, 100.0),
+        ];
         for _ in 0..3 {
             pos.push([0, 1, 2].map(|k| c[k] + rng.range(-1.0, 1.0)));
         }
         let b = 3 * t as u32;
         idx.push([b, b + 1, b + 2]);
     }
-    Scene::new("soup", format!("{count} random triangles, centres in [0,100]^3, vertices +-1"), pos, idx)
+    Scene::new(
+        "soup",
+        format!("{count} random triangles, centres in [0,100]^3, vertices +-1"),
+        pos,
+        idx,
+    )
 }
 
 /// `count` randomly rotated boxes (side lengths log-uniform in [0.05, 5] per axis, centres
@@ -159,20 +197,51 @@ pub fn boxes(count: usize) -> Scene {
     let mut pos = Vec::with_capacity(count * 8 + 4);
     let mut idx = Vec::with_capacity(count * 12 + 2);
     const FACES: [[u32; 3]; 12] = [
-        [0, 2, 3], [0, 3, 1], [4, 5, 7], [4, 7, 6], [0, 1, 5], [0, 5, 4],
-        [2, 6, 7], [2, 7, 3], [0, 4, 6], [0, 6, 2], [1, 3, 7], [1, 7, 5],
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
     ];
     for _ in 0..count {
-        let c = [rng.range(0.0, 100.0), rng.range(0.0, 100.0), rng.range(0.0, 100.0)];
-        let h = [0; 3].map(|_| 0.5 * (0.05f32.ln() + rng.f32() * (5.0f32.ln() - 0.05f32.ln())).exp());
+        let c = [
+            rng.range(0.0, 100.0),
+            rng.range(0.0, 100.0),
+            rng.range(0.0, 100.0),
+        ];
+        let h =
+            [0; 3].map(|_| 0.5 * (0.05f32.ln() + rng.f32() * (5.0f32.ln() - 0.05f32.ln())).exp());
         // Uniform random rotation (Shoemake's quaternion method).
-        let (u1, u2, u3) = (rng.f32(), rng.range(0.0, std::f32::consts::TAU), rng.range(0.0, std::f32::consts::TAU));
+        let (u1, u2, u3) = (
+            rng.f32(),
+            rng.range(0.0, std::f32::consts::TAU),
+            rng.range(0.0, std::f32::consts::TAU),
+        );
         let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
         let (x, y, z, w) = (a * u2.sin(), a * u2.cos(), b * u3.sin(), b * u3.cos());
         let m = [
-            [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-            [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-            [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - z * w),
+                2.0 * (x * z + y * w),
+            ],
+            [
+                2.0 * (x * y + z * w),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - x * w),
+            ],
+            [
+                2.0 * (x * z - y * w),
+                2.0 * (y * z + x * w),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
         ];
         let base = pos.len() as u32;
         for corner in 0..8u32 {
@@ -191,7 +260,9 @@ pub fn boxes(count: usize) -> Scene {
     idx.push([base, base + 3, base + 2]);
     Scene::new(
         "boxes",
-        format!("{count} rotated boxes (sides log-uniform 0.05-5, centres in [0,100]^3) + ground plane"),
+        format!(
+            "{count} rotated boxes (sides log-uniform 0.05-5, centres in [0,100]^3) + ground plane"
+        ),
         pos,
         idx,
     )
@@ -206,6 +277,12 @@ pub fn deformed(scene: &Scene) -> Vec<[f32; 3]> {
     scene
         .positions
         .iter()
-        .map(|p| [p[0] + amp * (k * p[1]).sin(), p[1] + amp * (k * p[2]).sin(), p[2] + amp * (k * p[0]).sin()])
+        .map(|p| {
+            [
+                p[0] + amp * (k * p[1]).sin(),
+                p[1] + amp * (k * p[2]).sin(),
+                p[2] + amp * (k * p[0]).sin(),
+            ]
+        })
         .collect()
 }

@@ -466,7 +466,19 @@ fn bench_json_lines() {
     // so that `..` is inside the fixture, whatever the system's temporary directory holds.
     let nested = f.path("work/here");
     std::fs::create_dir_all(&nested).unwrap();
-    let o = hostas(&["bench", "--reps", "1", "--rays", "64", "--presets", "fast-build", "--json"], &nested);
+    let o = hostas(
+        &[
+            "bench",
+            "--reps",
+            "1",
+            "--rays",
+            "64",
+            "--presets",
+            "fast-build",
+            "--json",
+        ],
+        &nested,
+    );
     let out = ok(&o);
     assert_eq!(out.lines().count(), 2, "{out}");
     assert!(stderr(&o).contains("absent"), "{}", stderr(&o));

@@ -12,14 +12,23 @@ pub fn rng(seed: u64) -> Rand {
 }
 
 fn v3(r: &mut Rand, scale: f32) -> [f32; 3] {
-    [r.gen_range(-scale..scale), r.gen_range(-scale..scale), r.gen_range(-scale..scale)]
+    [
+        r.gen_range(-scale..scale),
+        r.gen_range(-scale..scale),
+        r.gen_range(-scale..scale),
+    ]
 }
 
 /// A random rotation-scale(-mirror)-translation.
 pub fn random_transform(r: &mut Rand, allow_mirror: bool) -> Affine {
     // Random rotation from a random unit quaternion.
     let q: [f32; 4] = loop {
-        let q = [r.gen_range(-1.0f32..1.0), r.gen_range(-1.0..1.0), r.gen_range(-1.0..1.0), r.gen_range(-1.0..1.0)];
+        let q = [
+            r.gen_range(-1.0f32..1.0),
+            r.gen_range(-1.0..1.0),
+            r.gen_range(-1.0..1.0),
+            r.gen_range(-1.0..1.0),
+        ];
         let n = q.iter().map(|x| x * x).sum::<f32>().sqrt();
         if n > 0.1 {
             break q.map(|x| x / n);
@@ -27,11 +36,27 @@ pub fn random_transform(r: &mut Rand, allow_mirror: bool) -> Affine {
     };
     let [w, x, y, z] = q;
     let rot = [
-        [1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y - z * w), 2.0 * (x * z + y * w)],
-        [2.0 * (x * y + z * w), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z - x * w)],
-        [2.0 * (x * z - y * w), 2.0 * (y * z + x * w), 1.0 - 2.0 * (x * x + y * y)],
+        [
+            1.0 - 2.0 * (y * y + z * z),
+            2.0 * (x * y - z * w),
+            2.0 * (x * z + y * w),
+        ],
+        [
+            2.0 * (x * y + z * w),
+            1.0 - 2.0 * (x * x + z * z),
+            2.0 * (y * z - x * w),
+        ],
+        [
+            2.0 * (x * z - y * w),
+            2.0 * (y * z + x * w),
+            1.0 - 2.0 * (x * x + y * y),
+        ],
     ];
-    let mut s = [r.gen_range(0.3f32..3.0), r.gen_range(0.3..3.0), r.gen_range(0.3..3.0)];
+    let mut s = [
+        r.gen_range(0.3f32..3.0),
+        r.gen_range(0.3..3.0),
+        r.gen_range(0.3..3.0),
+    ];
     if allow_mirror && r.gen_bool(0.3) {
         s[r.gen_range(0..3)] *= -1.0;
     }
@@ -53,18 +78,32 @@ pub fn random_triangles(r: &mut Rand, n: usize, adversarial: bool) -> GeometryDe
     let mut indices = Vec::new();
     for i in 0..n {
         // Adversarial scenes also place some triangles far away (large coordinates).
-        let far = if adversarial && r.gen_bool(0.05) { 1e4 } else { 1.0 };
+        let far = if adversarial && r.gen_bool(0.05) {
+            1e4
+        } else {
+            1.0
+        };
         let c = v3(r, 10.0).map(|x| x * far);
-        let size = if adversarial && r.gen_bool(0.1) { [1e-4f32, 1e3, 1.0][r.gen_range(0..3)] } else { r.gen_range(0.2..3.0) };
+        let size = if adversarial && r.gen_bool(0.1) {
+            [1e-4f32, 1e3, 1.0][r.gen_range(0..3)]
+        } else {
+            r.gen_range(0.2..3.0)
+        };
         let mut tri = [0, 1, 2].map(|_| {
             let d = v3(r, size);
             [c[0] + d[0], c[1] + d[1], c[2] + d[2]]
         });
         if adversarial {
             match r.gen_range(0..20) {
-                0 => tri[2] = tri[0],                                     // degenerate: repeated vertex
-                1 => tri[2] = [2.0 * tri[1][0] - tri[0][0], 2.0 * tri[1][1] - tri[0][1], 2.0 * tri[1][2] - tri[0][2]], // collinear
-                2 => tri[r.gen_range(0..3)][0] = f32::NAN,                // inactive
+                0 => tri[2] = tri[0], // degenerate: repeated vertex
+                1 => {
+                    tri[2] = [
+                        2.0 * tri[1][0] - tri[0][0],
+                        2.0 * tri[1][1] - tri[0][1],
+                        2.0 * tri[1][2] - tri[0][2],
+                    ]
+                } // collinear
+                2 => tri[r.gen_range(0..3)][0] = f32::NAN, // inactive
                 _ => {}
             }
         }
@@ -81,27 +120,55 @@ pub fn random_triangles(r: &mut Rand, n: usize, adversarial: bool) -> GeometryDe
             positions.extend_from_slice(&tri);
         }
     }
-    let transform = if r.gen_bool(0.3) { Some(random_transform(r, true)) } else { None };
-    let flags = if r.gen_bool(0.5) { vk::GeometryFlagsKHR::OPAQUE } else { vk::GeometryFlagsKHR::empty() };
-    GeometryDesc::Triangles { positions, indices, transform, flags }
+    let transform = if r.gen_bool(0.3) {
+        Some(random_transform(r, true))
+    } else {
+        None
+    };
+    let flags = if r.gen_bool(0.5) {
+        vk::GeometryFlagsKHR::OPAQUE
+    } else {
+        vk::GeometryFlagsKHR::empty()
+    };
+    GeometryDesc::Triangles {
+        positions,
+        indices,
+        transform,
+        flags,
+    }
 }
 
 pub fn random_boxes(r: &mut Rand, n: usize, adversarial: bool) -> GeometryDesc {
     let boxes = (0..n)
         .map(|_| {
             let c = v3(r, 10.0);
-            let mut e = [r.gen_range(0.05f32..2.0), r.gen_range(0.05..2.0), r.gen_range(0.05..2.0)];
+            let mut e = [
+                r.gen_range(0.05f32..2.0),
+                r.gen_range(0.05..2.0),
+                r.gen_range(0.05..2.0),
+            ];
             if adversarial && r.gen_bool(0.1) {
                 e[r.gen_range(0..3)] = 0.0; // flat box
             }
-            let mut b = [c[0] - e[0], c[1] - e[1], c[2] - e[2], c[0] + e[0], c[1] + e[1], c[2] + e[2]];
+            let mut b = [
+                c[0] - e[0],
+                c[1] - e[1],
+                c[2] - e[2],
+                c[0] + e[0],
+                c[1] + e[1],
+                c[2] + e[2],
+            ];
             if adversarial && r.gen_bool(0.05) {
                 b[0] = f32::NAN; // inactive
             }
             b
         })
         .collect();
-    let flags = if r.gen_bool(0.5) { vk::GeometryFlagsKHR::OPAQUE } else { vk::GeometryFlagsKHR::empty() };
+    let flags = if r.gen_bool(0.5) {
+        vk::GeometryFlagsKHR::OPAQUE
+    } else {
+        vk::GeometryFlagsKHR::empty()
+    };
     GeometryDesc::Aabbs { boxes, flags }
 }
 
@@ -117,7 +184,11 @@ pub fn random_scene(r: &mut Rand, prims_per_blas: usize, adversarial: bool) -> S
                 geometries: (0..ng)
                     .map(|_| {
                         let n = r.gen_range(0..=prims_per_blas);
-                        if aabbs { random_boxes(r, n, adversarial) } else { random_triangles(r, n, adversarial) }
+                        if aabbs {
+                            random_boxes(r, n, adversarial)
+                        } else {
+                            random_triangles(r, n, adversarial)
+                        }
                     })
                     .collect(),
             }
@@ -138,16 +209,31 @@ pub fn random_scene(r: &mut Rand, prims_per_blas: usize, adversarial: bool) -> S
                     flags |= f;
                 }
             }
-            if flags.contains(vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE) {
+            if flags.contains(
+                vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+                    | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE,
+            ) {
                 flags &= !vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
             }
             InstanceDesc {
-                transform: if i == 0 || r.gen_bool(0.3) { Affine::IDENTITY } else { random_transform(r, true) },
+                transform: if i == 0 || r.gen_bool(0.3) {
+                    Affine::IDENTITY
+                } else {
+                    random_transform(r, true)
+                },
                 custom_index: 0x807f00 + i as u32,
-                mask: if r.gen_bool(0.7) { 0xff } else { r.r#gen::<u8>() },
+                mask: if r.gen_bool(0.7) {
+                    0xff
+                } else {
+                    r.r#gen::<u8>()
+                },
                 sbt_record_offset: r.gen_range(0..1 << 24),
                 flags,
-                blas: if adversarial && r.gen_bool(0.15) { None } else { Some(r.gen_range(0..nb)) },
+                blas: if adversarial && r.gen_bool(0.15) {
+                    None
+                } else {
+                    Some(r.gen_range(0..nb))
+                },
             }
         })
         .collect();
@@ -157,9 +243,21 @@ pub fn random_scene(r: &mut Rand, prims_per_blas: usize, adversarial: bool) -> S
 /// Valid random ray flags: at most one of each exclusive group.
 pub fn random_flags(r: &mut Rand) -> RayFlags {
     let mut f = RayFlags::NONE;
-    let opacity = [RayFlags::NONE, RayFlags::OPAQUE, RayFlags::NO_OPAQUE, RayFlags::CULL_OPAQUE, RayFlags::CULL_NO_OPAQUE];
+    let opacity = [
+        RayFlags::NONE,
+        RayFlags::OPAQUE,
+        RayFlags::NO_OPAQUE,
+        RayFlags::CULL_OPAQUE,
+        RayFlags::CULL_NO_OPAQUE,
+    ];
     f = f | opacity[r.gen_range(0..opacity.len())];
-    let cull = [RayFlags::NONE, RayFlags::NONE, RayFlags::CULL_BACK_FACING_TRIANGLES, RayFlags::CULL_FRONT_FACING_TRIANGLES, RayFlags::SKIP_TRIANGLES];
+    let cull = [
+        RayFlags::NONE,
+        RayFlags::NONE,
+        RayFlags::CULL_BACK_FACING_TRIANGLES,
+        RayFlags::CULL_FRONT_FACING_TRIANGLES,
+        RayFlags::SKIP_TRIANGLES,
+    ];
     let c = cull[r.gen_range(0..cull.len())];
     f = f | c;
     if c != RayFlags::SKIP_TRIANGLES && r.gen_bool(0.15) {
@@ -177,7 +275,9 @@ pub fn random_ray(r: &mut Rand, scene: &SceneDesc) -> Ray {
         _ => {
             // A feature of a random primitive.
             let inst = &scene.instances[r.gen_range(0..scene.instances.len())];
-            let Some(b) = inst.blas else { return Ray::new(origin, v3(r, 1.0)) };
+            let Some(b) = inst.blas else {
+                return Ray::new(origin, v3(r, 1.0));
+            };
             let geoms = &scene.blases[b].geometries;
             let g = &geoms[r.gen_range(0..geoms.len())];
             let n = g.primitive_count();
@@ -189,26 +289,62 @@ pub fn random_ray(r: &mut Rand, scene: &SceneDesc) -> Ray {
                     GeometryDesc::Triangles { .. } => match g.triangle(p) {
                         Some(v) => {
                             let k = r.gen_range(0..3);
-                            if r.gen_bool(0.5) { v[k] } else { let j = (k + 1) % 3; [0.5 * (v[k][0] + v[j][0]), 0.5 * (v[k][1] + v[j][1]), 0.5 * (v[k][2] + v[j][2])] }
+                            if r.gen_bool(0.5) {
+                                v[k]
+                            } else {
+                                let j = (k + 1) % 3;
+                                [
+                                    0.5 * (v[k][0] + v[j][0]),
+                                    0.5 * (v[k][1] + v[j][1]),
+                                    0.5 * (v[k][2] + v[j][2]),
+                                ]
+                            }
                         }
                         None => v3(r, 12.0),
                     },
                     GeometryDesc::Aabbs { boxes, .. } => {
                         let bx = boxes[p as usize];
-                        [if r.gen_bool(0.5) { bx[0] } else { bx[3] }, if r.gen_bool(0.5) { bx[1] } else { bx[4] }, if r.gen_bool(0.5) { bx[2] } else { bx[5] }]
+                        [
+                            if r.gen_bool(0.5) { bx[0] } else { bx[3] },
+                            if r.gen_bool(0.5) { bx[1] } else { bx[4] },
+                            if r.gen_bool(0.5) { bx[2] } else { bx[5] },
+                        ]
                     }
                 };
                 inst.transform.point(local)
             }
         }
     };
-    let mut dir = [target[0] - origin[0], target[1] - origin[1], target[2] - origin[2]];
+    let mut dir = [
+        target[0] - origin[0],
+        target[1] - origin[1],
+        target[2] - origin[2],
+    ];
     if dir == [0.0; 3] || dir.iter().any(|v| !v.is_finite()) {
         dir = [0.0, 0.0, 1.0];
     }
-    let t_min = if r.gen_bool(0.2) { r.gen_range(0.0..0.5) } else { 0.0 };
-    let t_max = if r.gen_bool(0.3) { r.gen_range(0.5..2.0) } else { f32::INFINITY };
-    Ray { origin, t_min, direction: dir, t_max: t_max.max(t_min), flags: RayFlags::NONE, cull_mask: if r.gen_bool(0.8) { 0xff } else { r.r#gen::<u8>() as u32 } }
+    let t_min = if r.gen_bool(0.2) {
+        r.gen_range(0.0..0.5)
+    } else {
+        0.0
+    };
+    let t_max = if r.gen_bool(0.3) {
+        r.gen_range(0.5..2.0)
+    } else {
+        f32::INFINITY
+    };
+    Ray {
+        origin,
+        t_min,
+        direction: dir,
+        t_max: t_max.max(t_min),
+        flags: RayFlags::NONE,
+        cull_mask: if r.gen_bool(0.8) {
+            0xff
+        } else {
+            r.r#gen::<u8>() as u32
+        },
+    }
 }
 
 /// A regular grid of `n` x `n` cells, two triangles per cell, consistent winding, z = 0,
@@ -224,15 +360,29 @@ pub fn grid(n: u32, transform: Option<Affine>) -> GeometryDesc {
     let id = |x: u32, y: u32| y * (n + 1) + x;
     for y in 0..n {
         for x in 0..n {
-            indices.extend_from_slice(&[id(x, y), id(x + 1, y), id(x + 1, y + 1), id(x, y), id(x + 1, y + 1), id(x, y + 1)]);
+            indices.extend_from_slice(&[
+                id(x, y),
+                id(x + 1, y),
+                id(x + 1, y + 1),
+                id(x, y),
+                id(x + 1, y + 1),
+                id(x, y + 1),
+            ]);
         }
     }
-    GeometryDesc::Triangles { positions, indices, transform, flags: vk::GeometryFlagsKHR::empty() }
+    GeometryDesc::Triangles {
+        positions,
+        indices,
+        transform,
+        flags: vk::GeometryFlagsKHR::empty(),
+    }
 }
 
 /// A closed fan of `k` triangles around `center` (radius 1, z = center z), consistent winding.
 pub fn fan(center: [f32; 3], k: u32, r: &mut Rand) -> GeometryDesc {
-    let mut angles: Vec<f32> = (0..k).map(|i| (i as f32 + r.gen_range(-0.3..0.3)) / k as f32 * std::f32::consts::TAU).collect();
+    let mut angles: Vec<f32> = (0..k)
+        .map(|i| (i as f32 + r.gen_range(-0.3..0.3)) / k as f32 * std::f32::consts::TAU)
+        .collect();
     angles.sort_by(f32::total_cmp);
     let mut positions = vec![center];
     for a in &angles {
@@ -242,5 +392,10 @@ pub fn fan(center: [f32; 3], k: u32, r: &mut Rand) -> GeometryDesc {
     for i in 0..k {
         indices.extend_from_slice(&[0, 1 + i, 1 + (i + 1) % k]);
     }
-    GeometryDesc::Triangles { positions, indices, transform: None, flags: vk::GeometryFlagsKHR::empty() }
+    GeometryDesc::Triangles {
+        positions,
+        indices,
+        transform: None,
+        flags: vk::GeometryFlagsKHR::empty(),
+    }
 }

@@ -43,11 +43,19 @@ pub struct Oracle<'a> {
 
 /// The inclusive slab test in f64: entry distance, or `None`. `eps` grows the box (relative
 /// to its size and position) to ask "is this a near miss?".
-pub fn slab(o: [f32; 3], d: [f32; 3], b: &[f32; 6], t_min: f64, t_max: f64, eps: f64) -> Option<f64> {
+pub fn slab(
+    o: [f32; 3],
+    d: [f32; 3],
+    b: &[f32; 6],
+    t_min: f64,
+    t_max: f64,
+    eps: f64,
+) -> Option<f64> {
     let mut near = t_min;
     let mut far = t_max;
     for k in 0..3 {
-        let pad = eps * (1.0 + (b[k] as f64).abs().max((b[k + 3] as f64).abs()) + (o[k] as f64).abs());
+        let pad =
+            eps * (1.0 + (b[k] as f64).abs().max((b[k + 3] as f64).abs()) + (o[k] as f64).abs());
         let (lo, hi) = (b[k] as f64 - pad, b[k + 3] as f64 + pad);
         let (ok, dk) = (o[k] as f64, d[k] as f64);
         if dk == 0.0 {
@@ -65,7 +73,14 @@ pub fn slab(o: [f32; 3], d: [f32; 3], b: &[f32; 6], t_min: f64, t_max: f64, eps:
 
 impl<'a> Oracle<'a> {
     pub fn new(scene: &'a SceneDesc) -> Oracle<'a> {
-        Oracle { scene, inverses: scene.instances.iter().map(|i| i.transform.inverse()).collect() }
+        Oracle {
+            scene,
+            inverses: scene
+                .instances
+                .iter()
+                .map(|i| i.transform.inverse())
+                .collect(),
+        }
     }
 
     /// Every candidate with `t` inside the ray's range (strict for triangles, inclusive for
@@ -78,7 +93,9 @@ impl<'a> Oracle<'a> {
             if (inst.mask as u32) & ray.cull_mask & 0xff == 0 {
                 continue;
             }
-            let Some(w2o) = self.inverses[id] else { continue };
+            let Some(w2o) = self.inverses[id] else {
+                continue;
+            };
             let o = w2o.point(ray.origin);
             let d = w2o.vector(ray.direction);
             let sheared = ShearedRay::new(o, d);
@@ -98,7 +115,9 @@ impl<'a> Oracle<'a> {
                 if f.contains(RayFlags::NO_OPAQUE) {
                     opaque = false;
                 }
-                if (opaque && f.contains(RayFlags::CULL_OPAQUE)) || (!opaque && f.contains(RayFlags::CULL_NO_OPAQUE)) {
+                if (opaque && f.contains(RayFlags::CULL_OPAQUE))
+                    || (!opaque && f.contains(RayFlags::CULL_NO_OPAQUE))
+                {
                     continue;
                 }
                 match geom {
@@ -108,8 +127,13 @@ impl<'a> Oracle<'a> {
                         }
                         for p in 0..geom.primitive_count() {
                             let Some(v) = geom.triangle(p) else { continue };
-                            let flat = [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]];
-                            let Some(h) = sheared.intersect(&flat) else { continue };
+                            let flat = [
+                                v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0],
+                                v[2][1], v[2][2],
+                            ];
+                            let Some(h) = sheared.intersect(&flat) else {
+                                continue;
+                            };
                             if !(ray.t_min < h.t && h.t < ray.t_max) {
                                 continue;
                             }
@@ -117,8 +141,10 @@ impl<'a> Oracle<'a> {
                             if iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING) {
                                 front = !front;
                             }
-                            if !iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE)
-                                && ((front && f.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES)) || (!front && f.contains(RayFlags::CULL_BACK_FACING_TRIANGLES)))
+                            if !iflags.contains(
+                                vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+                            ) && ((front && f.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES))
+                                || (!front && f.contains(RayFlags::CULL_BACK_FACING_TRIANGLES)))
                             {
                                 continue;
                             }
@@ -142,7 +168,10 @@ impl<'a> Oracle<'a> {
                             if bx[0].is_nan() {
                                 continue;
                             }
-                            let Some(t) = slab(o, d, bx, ray.t_min as f64, ray.t_max as f64, eps) else { continue };
+                            let Some(t) = slab(o, d, bx, ray.t_min as f64, ray.t_max as f64, eps)
+                            else {
+                                continue;
+                            };
                             out.push(Candidate {
                                 kind: CandidateKind::Aabb,
                                 instance_id: id as u32,

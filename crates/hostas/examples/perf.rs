@@ -1,7 +1,7 @@
 //! A quick look at build, trace and refit speed on a generated sphere. The full benchmark is
 //! `hostas bench` (and `bench/peers` for the side-by-side comparison).
 
-use hostas::{vk, Device, Ray};
+use hostas::{Device, Ray, vk};
 use std::time::Instant;
 
 fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
@@ -26,19 +26,38 @@ fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 }
 
 fn main() {
-    let n: u32 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(500);
-    let res: u32 = std::env::var("PERF_RES").ok().and_then(|s| s.parse().ok()).unwrap_or(512);
+    let n: u32 = std::env::args()
+        .nth(1)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(500);
+    let res: u32 = std::env::var("PERF_RES")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(512);
     // `perf N PRESET`: build that preset only (for instruction counts with `perf stat`).
     let only: Option<String> = std::env::args().nth(2);
     let (p, idx) = sphere(n);
     let tris = idx.len() as f64;
-    println!("sphere: {} triangles, {} threads", idx.len(), rayon::current_num_threads());
+    println!(
+        "sphere: {} triangles, {} threads",
+        idx.len(),
+        rayon::current_num_threads()
+    );
     let device = Device::new();
     for (name, flags) in [
-        ("fast-trace", vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE),
-        ("fast-build", vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD),
+        (
+            "fast-trace",
+            vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+        ),
+        (
+            "fast-build",
+            vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD,
+        ),
         ("default", vk::BuildAccelerationStructureFlagsKHR::empty()),
-        ("low-memory", vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY),
+        (
+            "low-memory",
+            vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY,
+        ),
     ] {
         if only.as_deref().is_some_and(|o| o != name) {
             continue;
@@ -48,12 +67,23 @@ fn main() {
         let build = t.elapsed().as_secs_f64();
         let s = device.statistics(blas).unwrap();
         if std::env::var("PERF_BUILD_ONLY").is_ok() {
-            println!("{name}: {:.1} ms, SAH {:.2}, {} nodes", build * 1e3, s.sah_cost, s.node_count);
+            println!(
+                "{name}: {:.1} ms, SAH {:.2}, {} nodes",
+                build * 1e3,
+                s.sah_cost,
+                s.node_count
+            );
             continue;
         }
         // Refit: an update (src == dst) after moving every vertex.
         let moved: Vec<[f32; 3]> = p.iter().map(|v| [v[0] * 1.01, v[1] * 0.99, v[2]]).collect();
-        let ublas = hostas::quick::build_triangle_blas(&device, &p, &idx, flags | vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE).unwrap();
+        let ublas = hostas::quick::build_triangle_blas(
+            &device,
+            &p,
+            &idx,
+            flags | vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+        )
+        .unwrap();
         let geom = [hostas::Geometry::triangles(
             hostas::TrianglesData {
                 vertex_format: vk::Format::R32G32B32_SFLOAT,
@@ -66,7 +96,10 @@ fn main() {
             },
             vk::GeometryFlagsKHR::OPAQUE,
         )];
-        let range = [hostas::BuildRangeInfo { primitive_count: idx.len() as u32, ..Default::default() }];
+        let range = [hostas::BuildRangeInfo {
+            primitive_count: idx.len() as u32,
+            ..Default::default()
+        }];
         let mut scratch = vec![0u8; 4096];
         let t = Instant::now();
         let info = hostas::BuildGeometryInfo {
@@ -78,7 +111,9 @@ fn main() {
             geometries: &geom,
             scratch: Some(&mut scratch),
         };
-        device.build_acceleration_structures(&mut [info], &[&range]).unwrap();
+        device
+            .build_acceleration_structures(&mut [info], &[&range])
+            .unwrap();
         let refit = tris / t.elapsed().as_secs_f64() / 1e6;
         if std::env::var("PERF_REFIT_ONLY").is_ok() {
             println!("{name}: refit {refit:.1} Mtris/s");
@@ -90,8 +125,15 @@ fn main() {
         let mut hits = 0;
         for y in 0..res {
             for x in 0..res {
-                let d = [(x as f32 / res as f32 - 0.5) * 1.2, (y as f32 / res as f32 - 0.5) * 1.2, -1.0];
-                hits += scene.trace_closest(&Ray::new([0.0, 0.0, 3.0], d)).unwrap().is_hit() as u32;
+                let d = [
+                    (x as f32 / res as f32 - 0.5) * 1.2,
+                    (y as f32 / res as f32 - 0.5) * 1.2,
+                    -1.0,
+                ];
+                hits += scene
+                    .trace_closest(&Ray::new([0.0, 0.0, 3.0], d))
+                    .unwrap()
+                    .is_hit() as u32;
             }
         }
         let primary = (res * res) as f64 / t.elapsed().as_secs_f64() / 1e6;

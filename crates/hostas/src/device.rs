@@ -42,7 +42,14 @@ pub struct AccelerationStructureCreateInfo {
 
 impl AccelerationStructureCreateInfo {
     pub fn new(ty: vk::AccelerationStructureTypeKHR, size: u64) -> Self {
-        AccelerationStructureCreateInfo { create_flags: Default::default(), buffer: None, offset: 0, size, ty, device_address: 0 }
+        AccelerationStructureCreateInfo {
+            create_flags: Default::default(),
+            buffer: None,
+            offset: 0,
+            size,
+            ty,
+            device_address: 0,
+        }
     }
 }
 
@@ -135,7 +142,9 @@ pub const COMPATIBILITY_UUID: [u8; 16] = {
     let v = LAYOUT_VERSION.to_le_bytes();
     let endian: u8 = if cfg!(target_endian = "little") { 1 } else { 2 };
     let ptr = (usize::BITS / 8) as u8;
-    let tag = [b'h', b'o', b's', b't', b'a', b's', v[0], v[1], v[2], v[3], endian, ptr];
+    let tag = [
+        b'h', b'o', b's', b't', b'a', b's', v[0], v[1], v[2], v[3], endian, ptr,
+    ];
     uuid_from(fnv1a(&tag, 2), fnv1a(&tag, 3))
 };
 
@@ -162,7 +171,12 @@ impl Device {
     pub fn new() -> Device {
         // Handles of different devices never collide: each device takes its own 2^40 range.
         let base = NEXT_DEVICE.fetch_add(1, Ordering::Relaxed) << 40;
-        Device { shared: Arc::new(Shared { objects: RwLock::new(HashMap::new()), next_handle: AtomicU64::new(base) }) }
+        Device {
+            shared: Arc::new(Shared {
+                objects: RwLock::new(HashMap::new()),
+                next_handle: AtomicU64::new(base),
+            }),
+        }
     }
 
     pub fn properties(&self) -> AccelerationStructureProperties {
@@ -177,7 +191,10 @@ impl Device {
 
     /// `vkCreateAccelerationStructureKHR`.
     #[doc(alias = "vkCreateAccelerationStructureKHR")]
-    pub fn create_acceleration_structure(&self, info: &AccelerationStructureCreateInfo) -> Result<AccelerationStructure> {
+    pub fn create_acceleration_structure(
+        &self,
+        info: &AccelerationStructureCreateInfo,
+    ) -> Result<AccelerationStructure> {
         let at = Location::NONE;
         match info.ty {
             vk::AccelerationStructureTypeKHR::TOP_LEVEL
@@ -187,12 +204,18 @@ impl Device {
                 return Err(Error::vuid(
                     "VUID-VkAccelerationStructureCreateInfoKHR-type-parameter",
                     at,
-                    format!("type {other:?} cannot be created with vkCreateAccelerationStructureKHR"),
+                    format!(
+                        "type {other:?} cannot be created with vkCreateAccelerationStructureKHR"
+                    ),
                 ));
             }
         }
         if info.offset % 256 != 0 {
-            return Err(Error::vuid("VUID-VkAccelerationStructureCreateInfoKHR-offset-03734", at, format!("offset {} is not a multiple of 256", info.offset)));
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureCreateInfoKHR-offset-03734",
+                at,
+                format!("offset {} is not a multiple of 256", info.offset),
+            ));
         }
         if info.device_address != 0 {
             return Err(Error::vuid(
@@ -201,39 +224,70 @@ impl Device {
                 "deviceAddress capture/replay needs accelerationStructureCaptureReplay, which hostas does not support",
             ));
         }
-        if info.create_flags.contains(vk::AccelerationStructureCreateFlagsKHR::DEVICE_ADDRESS_CAPTURE_REPLAY) {
+        if info
+            .create_flags
+            .contains(vk::AccelerationStructureCreateFlagsKHR::DEVICE_ADDRESS_CAPTURE_REPLAY)
+        {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureCreateInfoKHR-createFlags-03613",
                 at,
                 "DEVICE_ADDRESS_CAPTURE_REPLAY needs accelerationStructureCaptureReplay, which hostas does not support",
             ));
         }
-        if info.create_flags.contains(vk::AccelerationStructureCreateFlagsKHR::from_raw(0x4)) {
-            return Err(Error::NotSupported("VK_NV_ray_tracing_motion_blur structures (MOTION_BIT_NV)".into()));
+        if info
+            .create_flags
+            .contains(vk::AccelerationStructureCreateFlagsKHR::from_raw(0x4))
+        {
+            return Err(Error::NotSupported(
+                "VK_NV_ray_tracing_motion_blur structures (MOTION_BIT_NV)".into(),
+            ));
         }
         if info.size == 0 {
-            return Err(Error::vuid("VUID-VkAccelerationStructureCreateInfoKHR-size-parameter", at, "size must not be 0"));
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureCreateInfoKHR-size-parameter",
+                at,
+                "size must not be 0",
+            ));
         }
         let buffer = match &info.buffer {
             Some(b) => {
-                if info.offset.checked_add(info.size).is_none_or(|end| end > b.size()) {
+                if info
+                    .offset
+                    .checked_add(info.size)
+                    .is_none_or(|end| end > b.size())
+                {
                     return Err(Error::vuid(
                         "VUID-VkAccelerationStructureCreateInfoKHR-offset-03616",
                         at,
-                        format!("offset {} + size {} exceeds the buffer's {} bytes", info.offset, info.size, b.size()),
+                        format!(
+                            "offset {} + size {} exceeds the buffer's {} bytes",
+                            info.offset,
+                            info.size,
+                            b.size()
+                        ),
                     ));
                 }
                 b.clone()
             }
             None => {
                 if info.offset != 0 {
-                    return Err(Error::vuid("VUID-VkAccelerationStructureCreateInfoKHR-offset-03616", at, "offset must be 0 for library-owned memory"));
+                    return Err(Error::vuid(
+                        "VUID-VkAccelerationStructureCreateInfoKHR-offset-03616",
+                        at,
+                        "offset must be 0 for library-owned memory",
+                    ));
                 }
                 Buffer::new(info.size)?
             }
         };
         let handle = self.shared.next_handle.fetch_add(256, Ordering::Relaxed) + 256;
-        let obj = AsObject { handle, ty: info.ty, buffer, offset: info.offset, size: info.size };
+        let obj = AsObject {
+            handle,
+            ty: info.ty,
+            buffer,
+            offset: info.offset,
+            size: info.size,
+        };
         self.shared.objects.write().insert(handle, obj);
         Ok(AccelerationStructure(handle))
     }
@@ -244,7 +298,15 @@ impl Device {
         if a == AccelerationStructure::NULL {
             return Ok(());
         }
-        self.shared.objects.write().remove(&a.0).map(|_| ()).ok_or(Error::UnknownHandle { kind: "acceleration structure", handle: a.0 })
+        self.shared
+            .objects
+            .write()
+            .remove(&a.0)
+            .map(|_| ())
+            .ok_or(Error::UnknownHandle {
+                kind: "acceleration structure",
+                handle: a.0,
+            })
     }
 
     /// `vkGetAccelerationStructureDeviceAddressKHR`.
@@ -256,7 +318,10 @@ impl Device {
     /// `vkGetDeviceAccelerationStructureCompatibilityKHR`: compares the driver and compatibility
     /// UUIDs at the start of serialized data (`pVersionData`, 32 bytes).
     #[doc(alias = "vkGetDeviceAccelerationStructureCompatibilityKHR")]
-    pub fn compatibility(&self, version_data: &[u8; 32]) -> vk::AccelerationStructureCompatibilityKHR {
+    pub fn compatibility(
+        &self,
+        version_data: &[u8; 32],
+    ) -> vk::AccelerationStructureCompatibilityKHR {
         if version_data[..16] == DRIVER_UUID && version_data[16..] == COMPATIBILITY_UUID {
             vk::AccelerationStructureCompatibilityKHR::COMPATIBLE
         } else {
@@ -265,7 +330,15 @@ impl Device {
     }
 
     pub(crate) fn object(&self, a: AccelerationStructure) -> Result<AsObject> {
-        self.shared.objects.read().get(&a.0).cloned().ok_or(Error::UnknownHandle { kind: "acceleration structure", handle: a.0 })
+        self.shared
+            .objects
+            .read()
+            .get(&a.0)
+            .cloned()
+            .ok_or(Error::UnknownHandle {
+                kind: "acceleration structure",
+                handle: a.0,
+            })
     }
 
     /// The buffer and offset a structure lives at.
@@ -275,15 +348,27 @@ impl Device {
     }
 
     /// Runs `f` over the structure's bytes, read-locked.
-    pub(crate) fn with_bytes<R>(&self, a: AccelerationStructure, f: impl FnOnce(&[u8]) -> Result<R>) -> Result<R> {
+    pub(crate) fn with_bytes<R>(
+        &self,
+        a: AccelerationStructure,
+        f: impl FnOnce(&[u8]) -> Result<R>,
+    ) -> Result<R> {
         let o = self.object(a)?;
-        let mem = o.buffer.memory().ok_or_else(|| Error::NotBuilt { handle: a.0, reason: "its buffer has no memory bound".into() })?;
+        let mem = o.buffer.memory().ok_or_else(|| Error::NotBuilt {
+            handle: a.0,
+            reason: "its buffer has no memory bound".into(),
+        })?;
         let guard = mem.try_read().ok_or(Error::InUse { handle: a.0 })?;
         f(&guard.bytes()[o.offset as usize..(o.offset + o.size) as usize])
     }
 
     /// The header of a built structure.
     pub(crate) fn header(&self, a: AccelerationStructure) -> Result<crate::layout::Header> {
-        self.with_bytes(a, |b| view::read_header(b).map_err(|reason| Error::NotBuilt { handle: a.0, reason }))
+        self.with_bytes(a, |b| {
+            view::read_header(b).map_err(|reason| Error::NotBuilt {
+                handle: a.0,
+                reason,
+            })
+        })
     }
 }

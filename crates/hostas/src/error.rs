@@ -19,22 +19,39 @@ pub struct Location {
 }
 
 impl Location {
-    pub const NONE: Location = Location { info: None, geometry: None, primitive: None };
+    pub const NONE: Location = Location {
+        info: None,
+        geometry: None,
+        primitive: None,
+    };
     pub fn info(i: usize) -> Self {
-        Location { info: Some(i as u32), ..Self::NONE }
+        Location {
+            info: Some(i as u32),
+            ..Self::NONE
+        }
     }
     pub fn geometry(self, g: usize) -> Self {
-        Location { geometry: Some(g as u32), ..self }
+        Location {
+            geometry: Some(g as u32),
+            ..self
+        }
     }
     pub fn primitive(self, p: u32) -> Self {
-        Location { primitive: Some(p), ..self }
+        Location {
+            primitive: Some(p),
+            ..self
+        }
     }
 }
 
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let mut sep = "";
-        for (name, v) in [("info", self.info), ("geometry", self.geometry), ("primitive", self.primitive)] {
+        for (name, v) in [
+            ("info", self.info),
+            ("geometry", self.geometry),
+            ("primitive", self.primitive),
+        ] {
             if let Some(v) = v {
                 write!(f, "{sep}{name} {v}")?;
                 sep = ", ";
@@ -49,16 +66,27 @@ impl fmt::Display for Location {
 pub enum Error {
     /// The input breaks a valid-usage rule of the Vulkan specification.
     #[error("{vuid}: {message} ({location})")]
-    Validation { vuid: &'static str, message: String, location: Location },
+    Validation {
+        vuid: &'static str,
+        message: String,
+        location: Location,
+    },
     /// A host-memory range handed in (vertex, index, AABB, instance, scratch or destination
     /// bytes) is shorter than the command needs to read or write.
     #[error("input range too short: {what} needs {needed} bytes, {available} given ({location})")]
-    RangeTooShort { what: &'static str, needed: u64, available: u64, location: Location },
+    RangeTooShort {
+        what: &'static str,
+        needed: u64,
+        available: u64,
+        location: Location,
+    },
     /// A handle does not name a live object of this device.
     #[error("unknown {kind} handle {handle:#x}")]
     UnknownHandle { kind: &'static str, handle: u64 },
     /// The structure's memory is locked by a live `Scene` or another command.
-    #[error("acceleration structure {handle:#x} is in use (a Scene still reads it, or another command writes it)")]
+    #[error(
+        "acceleration structure {handle:#x} is in use (a Scene still reads it, or another command writes it)"
+    )]
     InUse { handle: u64 },
     /// A structure's bytes are not a hostas acceleration structure this version can read.
     #[error("acceleration structure {handle:#x} holds no valid structure: {reason}")]
@@ -73,7 +101,11 @@ pub enum Error {
 
 impl Error {
     pub(crate) fn vuid(vuid: &'static str, location: Location, message: impl Into<String>) -> Self {
-        Error::Validation { vuid, message: message.into(), location }
+        Error::Validation {
+            vuid,
+            message: message.into(),
+            location,
+        }
     }
 
     /// The VUID of a validation error.
@@ -87,7 +119,9 @@ impl Error {
     /// Where the error was found, for validation and range errors.
     pub fn location(&self) -> Option<Location> {
         match self {
-            Error::Validation { location, .. } | Error::RangeTooShort { location, .. } => Some(*location),
+            Error::Validation { location, .. } | Error::RangeTooShort { location, .. } => {
+                Some(*location)
+            }
             _ => None,
         }
     }
@@ -95,9 +129,9 @@ impl Error {
     /// The `VkResult` a Vulkan command returns for this error.
     pub fn vk_result(&self) -> vk::Result {
         match self {
-            Error::Validation { .. } | Error::RangeTooShort { .. } | Error::UnknownHandle { .. } => {
-                vk::Result::ERROR_VALIDATION_FAILED_EXT
-            }
+            Error::Validation { .. }
+            | Error::RangeTooShort { .. }
+            | Error::UnknownHandle { .. } => vk::Result::ERROR_VALIDATION_FAILED_EXT,
             Error::OutOfHostMemory(_) => vk::Result::ERROR_OUT_OF_HOST_MEMORY,
             Error::NotSupported(_) => vk::Result::ERROR_FEATURE_NOT_PRESENT,
             Error::InUse { .. } | Error::NotBuilt { .. } => vk::Result::ERROR_UNKNOWN,

@@ -37,8 +37,14 @@ pub use ash::vk;
 pub use commands::BuildSizes;
 pub use device::{AccelerationStructure, AccelerationStructureCreateInfo, Device};
 pub use error::{Error, Location, Result};
-pub use input::{AabbsData, BuildGeometryInfo, BuildRangeInfo, Geometry, GeometryData, InstancesData, TrianglesData};
 pub use input::instances::Instance;
+pub use input::{
+    AabbsData, BuildGeometryInfo, BuildRangeInfo, Geometry, GeometryData, InstancesData,
+    TrianglesData,
+};
 pub use math::{Aabb, Affine};
 pub use memory::Buffer;
-pub use traverse::{CandidateType, CommittedType, Hit, HitKind, Intersection, Ray, RayFlags, RayQuery, Scene, Tracer};
+pub use traverse::{
+    CandidateType, CommittedType, Hit, HitKind, Intersection, Ray, RayFlags, RayQuery, Scene,
+    Tracer,
+};

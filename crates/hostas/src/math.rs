@@ -22,7 +22,11 @@ pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
 }
 #[inline(always)]
 pub fn cross(a: Vec3, b: Vec3) -> Vec3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 #[inline(always)]
 pub fn dot(a: Vec3, b: Vec3) -> f32 {
@@ -38,7 +42,10 @@ pub struct Aabb {
 }
 
 impl Aabb {
-    pub const EMPTY: Aabb = Aabb { lo: [f32::INFINITY; 3], hi: [f32::NEG_INFINITY; 3] };
+    pub const EMPTY: Aabb = Aabb {
+        lo: [f32::INFINITY; 3],
+        hi: [f32::NEG_INFINITY; 3],
+    };
 
     #[inline(always)]
     pub fn point(p: Vec3) -> Self {
@@ -54,8 +61,16 @@ impl Aabb {
     #[inline(always)]
     pub fn union(&self, o: &Aabb) -> Aabb {
         Aabb {
-            lo: [fmin(self.lo[0], o.lo[0]), fmin(self.lo[1], o.lo[1]), fmin(self.lo[2], o.lo[2])],
-            hi: [fmax(self.hi[0], o.hi[0]), fmax(self.hi[1], o.hi[1]), fmax(self.hi[2], o.hi[2])],
+            lo: [
+                fmin(self.lo[0], o.lo[0]),
+                fmin(self.lo[1], o.lo[1]),
+                fmin(self.lo[2], o.lo[2]),
+            ],
+            hi: [
+                fmax(self.hi[0], o.hi[0]),
+                fmax(self.hi[1], o.hi[1]),
+                fmax(self.hi[2], o.hi[2]),
+            ],
         }
     }
     pub fn is_empty(&self) -> bool {
@@ -72,7 +87,11 @@ impl Aabb {
     }
     #[inline(always)]
     pub fn center2(&self) -> Vec3 {
-        [self.lo[0] + self.hi[0], self.lo[1] + self.hi[1], self.lo[2] + self.hi[2]]
+        [
+            self.lo[0] + self.hi[0],
+            self.lo[1] + self.hi[1],
+            self.lo[2] + self.hi[2],
+        ]
     }
 }
 
@@ -85,11 +104,22 @@ pub struct Affine {
 }
 
 impl Affine {
-    pub const IDENTITY: Affine =
-        Affine { m: [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] };
+    pub const IDENTITY: Affine = Affine {
+        m: [
+            [1.0, 0.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ],
+    };
 
     pub fn from_rows(r: [f32; 12]) -> Self {
-        Affine { m: [[r[0], r[1], r[2], r[3]], [r[4], r[5], r[6], r[7]], [r[8], r[9], r[10], r[11]]] }
+        Affine {
+            m: [
+                [r[0], r[1], r[2], r[3]],
+                [r[4], r[5], r[6], r[7]],
+                [r[8], r[9], r[10], r[11]],
+            ],
+        }
     }
     pub fn to_rows(&self) -> [f32; 12] {
         bytemuck::cast(self.m)
@@ -115,7 +145,8 @@ impl Affine {
     /// Determinant of the linear part, in f64.
     pub fn determinant(&self) -> f64 {
         let m = |r: usize, c: usize| self.m[r][c] as f64;
-        m(0, 0) * (m(1, 1) * m(2, 2) - m(1, 2) * m(2, 1)) - m(0, 1) * (m(1, 0) * m(2, 2) - m(1, 2) * m(2, 0))
+        m(0, 0) * (m(1, 1) * m(2, 2) - m(1, 2) * m(2, 1))
+            - m(0, 1) * (m(1, 0) * m(2, 2) - m(1, 2) * m(2, 0))
             + m(0, 2) * (m(1, 0) * m(2, 1) - m(1, 1) * m(2, 0))
     }
     /// The inverse, computed in f64; `None` when the linear part is singular or not finite.
@@ -162,7 +193,12 @@ impl Affine {
         }
         // Widen by a few ulps so that rounding in the corner products never loses a hit.
         for k in 0..3 {
-            let pad = (out.hi[k] - out.lo[k]).abs().max(out.lo[k].abs()).max(out.hi[k].abs()) * 4.0 * f32::EPSILON;
+            let pad = (out.hi[k] - out.lo[k])
+                .abs()
+                .max(out.lo[k].abs())
+                .max(out.hi[k].abs())
+                * 4.0
+                * f32::EPSILON;
             out.lo[k] -= pad;
             out.hi[k] += pad;
         }

@@ -62,14 +62,23 @@ pub struct Buffer {
 
 impl std::fmt::Debug for Buffer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Buffer").field("id", &self.inner.id).field("size", &self.inner.size).finish()
+        f.debug_struct("Buffer")
+            .field("id", &self.inner.id)
+            .field("size", &self.inner.size)
+            .finish()
     }
 }
 
 impl Buffer {
     /// A buffer of `size` bytes with no memory bound yet.
     pub fn new_unbound(size: u64) -> Buffer {
-        Buffer { inner: Arc::new(BufferInner { id: NEXT_BUFFER_ID.fetch_add(1, Ordering::Relaxed), size, memory: Mutex::new(None) }) }
+        Buffer {
+            inner: Arc::new(BufferInner {
+                id: NEXT_BUFFER_ID.fetch_add(1, Ordering::Relaxed),
+                size,
+                memory: Mutex::new(None),
+            }),
+        }
     }
     /// A buffer of `size` bytes with fresh host memory bound.
     pub fn new(size: u64) -> Result<Buffer> {
@@ -81,9 +90,14 @@ impl Buffer {
     pub fn bind_memory(&self) -> Result<()> {
         let mut m = self.inner.memory.lock();
         if m.is_some() {
-            return Err(Error::vuid("VUID-vkBindBufferMemory-buffer-07459", Default::default(), "buffer already has memory bound"));
+            return Err(Error::vuid(
+                "VUID-vkBindBufferMemory-buffer-07459",
+                Default::default(),
+                "buffer already has memory bound",
+            ));
         }
-        let len = usize::try_from(self.inner.size).map_err(|_| Error::OutOfHostMemory(format!("{} bytes", self.inner.size)))?;
+        let len = usize::try_from(self.inner.size)
+            .map_err(|_| Error::OutOfHostMemory(format!("{} bytes", self.inner.size)))?;
         *m = Some(Arc::new(RwLock::new(HostMemory::new(len)?)));
         Ok(())
     }
@@ -97,25 +111,40 @@ impl Buffer {
         self.inner.memory.lock().clone()
     }
     fn range(&self, offset: u64, len: usize) -> Result<std::ops::Range<usize>> {
-        let end = offset.checked_add(len as u64).filter(|&e| e <= self.inner.size);
+        let end = offset
+            .checked_add(len as u64)
+            .filter(|&e| e <= self.inner.size);
         match end {
             Some(e) => Ok(offset as usize..e as usize),
-            None => Err(Error::RangeTooShort { what: "buffer", needed: offset.saturating_add(len as u64), available: self.inner.size, location: Default::default() }),
+            None => Err(Error::RangeTooShort {
+                what: "buffer",
+                needed: offset.saturating_add(len as u64),
+                available: self.inner.size,
+                location: Default::default(),
+            }),
         }
     }
     /// Copies bytes out of the buffer's memory.
     pub fn read(&self, offset: u64, out: &mut [u8]) -> Result<()> {
-        let mem = self.memory().ok_or_else(|| Error::NotSupported("buffer has no memory bound".into()))?;
+        let mem = self
+            .memory()
+            .ok_or_else(|| Error::NotSupported("buffer has no memory bound".into()))?;
         let r = self.range(offset, out.len())?;
-        let guard = mem.try_read().ok_or(Error::InUse { handle: self.inner.id })?;
+        let guard = mem.try_read().ok_or(Error::InUse {
+            handle: self.inner.id,
+        })?;
         out.copy_from_slice(&guard.bytes()[r]);
         Ok(())
     }
     /// Copies bytes into the buffer's memory.
     pub fn write(&self, offset: u64, data: &[u8]) -> Result<()> {
-        let mem = self.memory().ok_or_else(|| Error::NotSupported("buffer has no memory bound".into()))?;
+        let mem = self
+            .memory()
+            .ok_or_else(|| Error::NotSupported("buffer has no memory bound".into()))?;
         let r = self.range(offset, data.len())?;
-        let mut guard = mem.try_write().ok_or(Error::InUse { handle: self.inner.id })?;
+        let mut guard = mem.try_write().ok_or(Error::InUse {
+            handle: self.inner.id,
+        })?;
         guard.bytes_mut()[r].copy_from_slice(data);
         Ok(())
     }

@@ -4,7 +4,9 @@
 use crate::device::{AccelerationStructure, AccelerationStructureCreateInfo, Device};
 use crate::error::Result;
 use crate::input::instances::Instance;
-use crate::input::{AabbsData, BuildGeometryInfo, BuildRangeInfo, Geometry, InstancesData, TrianglesData};
+use crate::input::{
+    AabbsData, BuildGeometryInfo, BuildRangeInfo, Geometry, InstancesData, TrianglesData,
+};
 use crate::math::{Aabb, Affine};
 use ash::vk;
 
@@ -17,9 +19,20 @@ pub fn build(
     ranges: &[BuildRangeInfo],
 ) -> Result<AccelerationStructure> {
     let counts: Vec<u32> = ranges.iter().map(|r| r.primitive_count).collect();
-    let probe = BuildGeometryInfo { ty, flags, mode: vk::BuildAccelerationStructureModeKHR::BUILD, src: None, dst: None, geometries, scratch: None };
+    let probe = BuildGeometryInfo {
+        ty,
+        flags,
+        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
+        src: None,
+        dst: None,
+        geometries,
+        scratch: None,
+    };
     let sizes = device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts)?;
-    let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, sizes.acceleration_structure_size))?;
+    let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+        ty,
+        sizes.acceleration_structure_size,
+    ))?;
     let mut scratch = vec![0u8; sizes.build_scratch_size as usize];
     let info = BuildGeometryInfo::build(ty, flags, geometries, dst, &mut scratch);
     match device.build_acceleration_structures(&mut [info], &[ranges]) {
@@ -50,23 +63,65 @@ pub fn build_triangle_blas(
         },
         vk::GeometryFlagsKHR::OPAQUE,
     );
-    let range = BuildRangeInfo { primitive_count: indices.len() as u32, ..Default::default() };
-    build(device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, flags, &[g], &[range])
+    let range = BuildRangeInfo {
+        primitive_count: indices.len() as u32,
+        ..Default::default()
+    };
+    build(
+        device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        flags,
+        &[g],
+        &[range],
+    )
 }
 
 /// A bottom-level structure over boxes (one geometry).
-pub fn build_aabb_blas(device: &Device, boxes: &[Aabb], geometry_flags: vk::GeometryFlagsKHR, flags: vk::BuildAccelerationStructureFlagsKHR) -> Result<AccelerationStructure> {
-    let g = Geometry::aabbs(AabbsData { data: bytemuck::cast_slice(boxes), stride: 24 }, geometry_flags);
-    let range = BuildRangeInfo { primitive_count: boxes.len() as u32, ..Default::default() };
-    build(device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, flags, &[g], &[range])
+pub fn build_aabb_blas(
+    device: &Device,
+    boxes: &[Aabb],
+    geometry_flags: vk::GeometryFlagsKHR,
+    flags: vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<AccelerationStructure> {
+    let g = Geometry::aabbs(
+        AabbsData {
+            data: bytemuck::cast_slice(boxes),
+            stride: 24,
+        },
+        geometry_flags,
+    );
+    let range = BuildRangeInfo {
+        primitive_count: boxes.len() as u32,
+        ..Default::default()
+    };
+    build(
+        device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        flags,
+        &[g],
+        &[range],
+    )
 }
 
 /// A top-level structure over `instances`.
-pub fn build_tlas(device: &Device, instances: &[Instance], flags: vk::BuildAccelerationStructureFlagsKHR) -> Result<AccelerationStructure> {
+pub fn build_tlas(
+    device: &Device,
+    instances: &[Instance],
+    flags: vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<AccelerationStructure> {
     let bytes: Vec<u8> = instances.iter().flat_map(|i| i.encode()).collect();
     let g = Geometry::instances(InstancesData::Array(&bytes), vk::GeometryFlagsKHR::empty());
-    let range = BuildRangeInfo { primitive_count: instances.len() as u32, ..Default::default() };
-    build(device, vk::AccelerationStructureTypeKHR::TOP_LEVEL, flags, &[g], &[range])
+    let range = BuildRangeInfo {
+        primitive_count: instances.len() as u32,
+        ..Default::default()
+    };
+    build(
+        device,
+        vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+        flags,
+        &[g],
+        &[range],
+    )
 }
 
 /// An instance of `blas` with `transform`, mask 0xff and no flags.
@@ -82,6 +137,13 @@ pub fn instance(blas: AccelerationStructure, transform: Affine) -> Instance {
 }
 
 /// A top-level structure with one identity instance of `blas`.
-pub fn build_single_instance_tlas(device: &Device, blas: AccelerationStructure) -> Result<AccelerationStructure> {
-    build_tlas(device, &[instance(blas, Affine::IDENTITY)], vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE)
+pub fn build_single_instance_tlas(
+    device: &Device,
+    blas: AccelerationStructure,
+) -> Result<AccelerationStructure> {
+    build_tlas(
+        device,
+        &[instance(blas, Affine::IDENTITY)],
+        vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+    )
 }

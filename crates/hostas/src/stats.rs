@@ -33,7 +33,15 @@ pub struct Statistics {
 
 impl Statistics {
     pub fn from_view(v: &View) -> Statistics {
-        let leaf_count = v.nodes.iter().map(|n| (0..crate::layout::WIDTH).filter(|&k| n.child[k] != EMPTY_CHILD && n.child[k] & LEAF_BIT != 0).count() as u32).sum();
+        let leaf_count = v
+            .nodes
+            .iter()
+            .map(|n| {
+                (0..crate::layout::WIDTH)
+                    .filter(|&k| n.child[k] != EMPTY_CHILD && n.child[k] & LEAF_BIT != 0)
+                    .count() as u32
+            })
+            .sum();
         let h = v.header;
         Statistics {
             top_level: h.kind == 0,
@@ -63,7 +71,10 @@ impl Device {
     /// Statistics of a built structure.
     pub fn statistics(&self, a: AccelerationStructure) -> Result<Statistics> {
         self.with_bytes(a, |b| {
-            let v = View::parse(b).map_err(|reason| Error::NotBuilt { handle: a.0, reason })?;
+            let v = View::parse(b).map_err(|reason| Error::NotBuilt {
+                handle: a.0,
+                reason,
+            })?;
             Ok(Statistics::from_view(&v))
         })
     }

@@ -13,8 +13,9 @@
 
 use hostas::input::vertex_format::SUPPORTED_VERTEX_FORMATS;
 use hostas::{
-    AabbsData, AccelerationStructure, AccelerationStructureCreateInfo, BuildGeometryInfo, BuildRangeInfo, CandidateType,
-    CommittedType, Device, Geometry, Instance, InstancesData, Ray, RayFlags, TrianglesData, vk,
+    AabbsData, AccelerationStructure, AccelerationStructureCreateInfo, BuildGeometryInfo,
+    BuildRangeInfo, CandidateType, CommittedType, Device, Geometry, Instance, InstancesData, Ray,
+    RayFlags, TrianglesData, vk,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -34,7 +35,11 @@ impl Unaligned {
         let storage = vec![fill; len + 16];
         let addr = storage.as_ptr() as usize;
         let start = (3 + 8 - addr % 8) % 8;
-        let u = Unaligned { storage, start, len };
+        let u = Unaligned {
+            storage,
+            start,
+            len,
+        };
         assert_eq!(u.bytes().as_ptr() as usize % 8, 3);
         u
     }
@@ -66,7 +71,10 @@ fn build(
         scratch: None,
     };
     let sizes = device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts)?;
-    let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, sizes.acceleration_structure_size))?;
+    let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+        ty,
+        sizes.acceleration_structure_size,
+    ))?;
     let mut scratch = Unaligned::new(sizes.build_scratch_size as usize, 0x5a);
     let info = BuildGeometryInfo::build(ty, flags, geometries, dst, scratch.bytes_mut());
     device.build_acceleration_structures(&mut [info], &[ranges])?;
@@ -74,7 +82,8 @@ fn build(
 }
 
 fn blas_flags() -> vk::BuildAccelerationStructureFlagsKHR {
-    vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+    vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS
+        | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
 }
 
 /// Distance between `x` and the next f32 away from zero.
@@ -106,7 +115,11 @@ struct Fmt {
 }
 
 const fn fmt(format: vk::Format, kind: Kind, components: usize) -> Fmt {
-    Fmt { format, kind, components }
+    Fmt {
+        format,
+        kind,
+        components,
+    }
 }
 
 /// Every format the specification lists for acceleration-structure vertex buffers (the mandatory
@@ -151,7 +164,11 @@ impl Fmt {
         }
     }
     fn size(&self) -> usize {
-        if self.kind == Kind::Packed { 4 } else { self.component_size() * self.components }
+        if self.kind == Kind::Packed {
+            4
+        } else {
+            self.component_size() * self.components
+        }
     }
     fn is_float(&self) -> bool {
         matches!(self.kind, Kind::F16 | Kind::F32 | Kind::F64)
@@ -193,7 +210,8 @@ impl Fmt {
                 Kind::F32 => {
                     // Needs more than f16's 11 significant bits: catches a decoder reading
                     // half of the component.
-                    let v = value.map_or(f32::NAN, |u| (unit_to_float(u) + (2f64).powi(-20)) as f32);
+                    let v =
+                        value.map_or(f32::NAN, |u| (unit_to_float(u) + (2f64).powi(-20)) as f32);
                     dst.copy_from_slice(&v.to_le_bytes());
                     v
                 }
@@ -244,9 +262,17 @@ impl Fmt {
 fn format_table_matches_the_library() {
     assert_eq!(SUPPORTED_VERTEX_FORMATS.len(), FORMATS.len());
     for f in &FORMATS {
-        let lib = SUPPORTED_VERTEX_FORMATS.iter().find(|i| i.format == f.format).unwrap_or_else(|| panic!("{:?} not supported", f.format));
+        let lib = SUPPORTED_VERTEX_FORMATS
+            .iter()
+            .find(|i| i.format == f.format)
+            .unwrap_or_else(|| panic!("{:?} not supported", f.format));
         assert_eq!(lib.size as usize, f.size(), "{:?}", f.format);
-        assert_eq!(lib.component_size as usize, f.component_size(), "{:?}", f.format);
+        assert_eq!(
+            lib.component_size as usize,
+            f.component_size(),
+            "{:?}",
+            f.format
+        );
         assert_eq!(lib.can_be_nan, f.is_float(), "{:?}", f.format);
     }
 }
@@ -263,14 +289,20 @@ const TRIANGLES: usize = 4;
 fn unit_triangle(t: usize) -> [[f64; 3]; 3] {
     let (ox, oy) = ((t % 2) as f64 * 0.5, (t / 2) as f64 * 0.5);
     let z = 0.2 + 0.2 * t as f64;
-    let a = if t == 0 { [0.0, 0.0, z] } else { [ox + 0.04, oy + 0.04, z] };
+    let a = if t == 0 {
+        [0.0, 0.0, z]
+    } else {
+        [ox + 0.04, oy + 0.04, z]
+    };
     [a, [ox + 0.46, oy + 0.1, z], [ox + 0.12, oy + 0.44, z]]
 }
 
 /// A non-trivial geometry transform: rotation about z (0.8/0.6), a small shear from z into x and
 /// y, a mirroring scale of z, and a translation. Row 2 depends on z only, so every triangle
 /// stays in a z = const plane and the rays along -z still reach it.
-const TRANSFORM: [f32; 12] = [0.8, -0.6, 0.125, 3.0, 0.6, 0.8, -0.0625, -2.0, 0.0, 0.0, -1.5, 0.75];
+const TRANSFORM: [f32; 12] = [
+    0.8, -0.6, 0.125, 3.0, 0.6, 0.8, -0.0625, -2.0, 0.0, 0.0, -1.5, 0.75,
+];
 const TRANSFORM_OFFSET: u32 = 32;
 
 /// An expected coordinate: value and allowed absolute error.
@@ -282,12 +314,23 @@ struct Expect {
 
 fn expected_position(p: [f32; 3], transform: bool, ulp_tol: f64) -> [Expect; 3] {
     if !transform {
-        return p.map(|v| Expect { value: v as f64, tol: ulp_tol * ulp(v) });
+        return p.map(|v| Expect {
+            value: v as f64,
+            tol: ulp_tol * ulp(v),
+        });
     }
     let m = TRANSFORM.map(|v| v as f64);
-    let mut out = [Expect { value: 0.0, tol: 0.0 }; 3];
+    let mut out = [Expect {
+        value: 0.0,
+        tol: 0.0,
+    }; 3];
     for (r, o) in out.iter_mut().enumerate() {
-        let terms = [m[4 * r] * p[0] as f64, m[4 * r + 1] * p[1] as f64, m[4 * r + 2] * p[2] as f64, m[4 * r + 3]];
+        let terms = [
+            m[4 * r] * p[0] as f64,
+            m[4 * r + 1] * p[1] as f64,
+            m[4 * r + 2] * p[2] as f64,
+            m[4 * r + 3],
+        ];
         let magnitude: f64 = terms.iter().map(|t| t.abs()).sum();
         // The library evaluates three products and three sums in f32: at most six roundings,
         // each of at most eps/2 of a partial result bounded by `magnitude`, so 3 eps; a decode
@@ -341,15 +384,28 @@ fn encode_case(c: &Case, inactive: Option<usize>) -> Built {
         (true, false) => 3 * f.component_size(),
     };
     // Where each vertex k of triangle t lives (slot numbers, firstVertex included).
-    let slot = |t: usize, k: usize| if indexed { fv + slot_of(3 * t + k) } else { fv + 3 * t + k };
-    let max_vertex = (0..TRIANGLES).flat_map(|t| (0..3).map(move |k| (t, k))).map(|(t, k)| slot(t, k)).max().unwrap_or(0);
+    let slot = |t: usize, k: usize| {
+        if indexed {
+            fv + slot_of(3 * t + k)
+        } else {
+            fv + 3 * t + k
+        }
+    };
+    let max_vertex = (0..TRIANGLES)
+        .flat_map(|t| (0..3).map(move |k| (t, k)))
+        .map(|(t, k)| slot(t, k))
+        .max()
+        .unwrap_or(0);
     let vertex_base = if indexed { 0 } else { primitive_offset };
     // Exactly as long as the last vertex read: the decoder must not need trailing padding.
     let mut vertices = Unaligned::new(vertex_base + max_vertex * stride + f.size(), 0xab);
     let mut expected = Vec::new();
     for t in 0..TRIANGLES {
         let unit = unit_triangle(t);
-        let mut tri = [[Expect { value: 0.0, tol: 0.0 }; 3]; 3];
+        let mut tri = [[Expect {
+            value: 0.0,
+            tol: 0.0,
+        }; 3]; 3];
         for k in 0..3 {
             let at = vertex_base + slot(t, k) * stride;
             let out = &mut vertices.bytes_mut()[at..at + f.size()];
@@ -393,7 +449,14 @@ fn encode_case(c: &Case, inactive: Option<usize>) -> Built {
         index_data: None,
         transform_data: None,
     };
-    Built { vertices, indices, transform, triangles, range, expected }
+    Built {
+        vertices,
+        indices,
+        transform,
+        triangles,
+        range,
+        expected,
+    }
 }
 
 impl Built {
@@ -421,7 +484,13 @@ fn run_case(device: &Device, c: &Case, inactive: Option<usize>) -> Vec<String> {
     let built = encode_case(c, inactive);
     let geometry = Geometry::triangles(built.data(), vk::GeometryFlagsKHR::OPAQUE);
     let mut errors = Vec::new();
-    let blas = match build(device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, blas_flags(), &[geometry], &[built.range]) {
+    let blas = match build(
+        device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        blas_flags(),
+        &[geometry],
+        &[built.range],
+    ) {
         Ok(b) => b,
         Err(e) => return vec![format!("{c:?}: build failed: {e}")],
     };
@@ -436,7 +505,10 @@ fn run_case(device: &Device, c: &Case, inactive: Option<usize>) -> Vec<String> {
             }
             if inactive == Some(t) {
                 if q.committed_type() != CommittedType::None {
-                    errors.push(format!("{c:?}: inactive triangle {t}: ray hit primitive {}", q.committed().primitive_index));
+                    errors.push(format!(
+                        "{c:?}: inactive triangle {t}: ray hit primitive {}",
+                        q.committed().primitive_index
+                    ));
                 }
                 continue;
             }
@@ -446,7 +518,10 @@ fn run_case(device: &Device, c: &Case, inactive: Option<usize>) -> Vec<String> {
             }
             let hit = *q.committed();
             if hit.primitive_index != t as u32 || hit.geometry_index != 0 || hit.instance_id != 0 {
-                errors.push(format!("{c:?}: triangle {t}: hit geometry {} primitive {}", hit.geometry_index, hit.primitive_index));
+                errors.push(format!(
+                    "{c:?}: triangle {t}: hit geometry {} primitive {}",
+                    hit.geometry_index, hit.primitive_index
+                ));
                 continue;
             }
             let got = q.triangle_vertex_positions(true).expect("positions");
@@ -466,8 +541,12 @@ fn run_case(device: &Device, c: &Case, inactive: Option<usize>) -> Vec<String> {
             }
         }
     }
-    device.destroy_acceleration_structure(tlas).expect("destroy");
-    device.destroy_acceleration_structure(blas).expect("destroy");
+    device
+        .destroy_acceleration_structure(tlas)
+        .expect("destroy");
+    device
+        .destroy_acceleration_structure(blas)
+        .expect("destroy");
     errors
 }
 
@@ -478,7 +557,14 @@ fn all_cases(index_type: vk::IndexType) -> Vec<Case> {
             for offset in [false, true] {
                 for first_vertex in [0, 5] {
                     for transform in [false, true] {
-                        out.push(Case { fmt, index_type, padded, offset, first_vertex, transform });
+                        out.push(Case {
+                            fmt,
+                            index_type,
+                            padded,
+                            offset,
+                            first_vertex,
+                            transform,
+                        });
                     }
                 }
             }
@@ -491,8 +577,21 @@ fn check_all(index_type: vk::IndexType) {
     let device = Device::new();
     let cases = all_cases(index_type);
     assert_eq!(cases.len(), 22 * 16);
-    let errors: Vec<String> = cases.iter().flat_map(|c| run_case(&device, c, None)).collect();
-    assert!(errors.is_empty(), "{} mismatches, first ones:\n{}", errors.len(), errors.iter().take(20).cloned().collect::<Vec<_>>().join("\n"));
+    let errors: Vec<String> = cases
+        .iter()
+        .flat_map(|c| run_case(&device, c, None))
+        .collect();
+    assert!(
+        errors.is_empty(),
+        "{} mismatches, first ones:\n{}",
+        errors.len(),
+        errors
+            .iter()
+            .take(20)
+            .cloned()
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
 }
 
 #[test]
@@ -516,14 +615,20 @@ fn every_format_uint32_indices() {
 fn encoder_spot_checks() {
     let mut b = [0u8; 8];
     let unorm8 = fmt(vk::Format::R8G8B8_UNORM, Kind::Unorm(8), 3);
-    assert_eq!(unorm8.encode([1.0, 0.0, 0.5], &mut b), [1.0, 0.0, 128.0 / 255.0]);
+    assert_eq!(
+        unorm8.encode([1.0, 0.0, 0.5], &mut b),
+        [1.0, 0.0, 128.0 / 255.0]
+    );
     assert_eq!(&b[..3], &[255, 0, 128]);
     let snorm8 = fmt(vk::Format::R8G8_SNORM, Kind::Snorm(8), 2);
     assert_eq!(snorm8.encode([0.0, 1.0, 0.7], &mut b), [-1.0, 1.0, 0.0]);
     assert_eq!(&b[..2], &[0x80, 0x7f]);
     let packed = fmt(vk::Format::A2B10G10R10_UNORM_PACK32, Kind::Packed, 4);
     assert_eq!(packed.encode([1.0, 0.0, 1.0], &mut b), [1.0, 0.0, 1.0]);
-    assert_eq!(u32::from_le_bytes([b[0], b[1], b[2], b[3]]), 0x3ff | (0x3ff << 20) | (0b10 << 30));
+    assert_eq!(
+        u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        0x3ff | (0x3ff << 20) | (0b10 << 30)
+    );
     let f16 = fmt(vk::Format::R16G16_SFLOAT, Kind::F16, 2);
     assert_eq!(f16.encode([0.75, 0.5, 0.0], &mut b), [0.5, 0.0, 0.0]);
     assert_eq!(&b[..4], &[0x00, 0x38, 0x00, 0x00]);
@@ -534,9 +639,20 @@ fn inactive_triangles_are_skipped_but_counted() {
     let device = Device::new();
     let mut errors = Vec::new();
     for fmt in FORMATS.into_iter().filter(|f| f.is_float()) {
-        for index_type in [vk::IndexType::NONE_KHR, vk::IndexType::UINT16, vk::IndexType::UINT32] {
+        for index_type in [
+            vk::IndexType::NONE_KHR,
+            vk::IndexType::UINT16,
+            vk::IndexType::UINT32,
+        ] {
             for transform in [false, true] {
-                let c = Case { fmt, index_type, padded: true, offset: true, first_vertex: 2, transform };
+                let c = Case {
+                    fmt,
+                    index_type,
+                    padded: true,
+                    offset: true,
+                    first_vertex: 2,
+                    transform,
+                };
                 // Triangle 1 is inactive: the hits on triangles 2 and 3 must still report
                 // primitive indices 2 and 3.
                 errors.extend(run_case(&device, &c, Some(1)));
@@ -546,7 +662,12 @@ fn inactive_triangles_are_skipped_but_counted() {
     assert!(errors.is_empty(), "{}", errors.join("\n"));
 }
 
-fn one_triangle_geometry<'a>(format: vk::Format, index_type: vk::IndexType, data: &'a [u8], idx: Option<&'a [u8]>) -> [Geometry<'a>; 1] {
+fn one_triangle_geometry<'a>(
+    format: vk::Format,
+    index_type: vk::IndexType,
+    data: &'a [u8],
+    idx: Option<&'a [u8]>,
+) -> [Geometry<'a>; 1] {
     [Geometry::triangles(
         TrianglesData {
             vertex_format: format,
@@ -566,11 +687,29 @@ fn uint8_indices_are_rejected() {
     let device = Device::new();
     let data = [0u8; 48];
     let idx = [0u8, 1, 2, 0];
-    let g = one_triangle_geometry(vk::Format::R32G32B32_SFLOAT, vk::IndexType::UINT8_KHR, &data, Some(&idx));
-    let range = BuildRangeInfo { primitive_count: 1, ..Default::default() };
-    let err = build(&device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, blas_flags(), &g, &[range]).unwrap_err();
+    let g = one_triangle_geometry(
+        vk::Format::R32G32B32_SFLOAT,
+        vk::IndexType::UINT8_KHR,
+        &data,
+        Some(&idx),
+    );
+    let range = BuildRangeInfo {
+        primitive_count: 1,
+        ..Default::default()
+    };
+    let err = build(
+        &device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        blas_flags(),
+        &g,
+        &[range],
+    )
+    .unwrap_err();
     assert!(matches!(err, hostas::Error::Validation { .. }), "{err:?}");
-    assert_eq!(err.vuid_str(), Some("VUID-VkAccelerationStructureGeometryTrianglesDataKHR-indexType-03798"));
+    assert_eq!(
+        err.vuid_str(),
+        Some("VUID-VkAccelerationStructureGeometryTrianglesDataKHR-indexType-03798")
+    );
     // quick::build asks for the sizes first, which already applies this rule (no info index there).
     assert_eq!(err.location().unwrap().geometry, Some(0));
 }
@@ -594,10 +733,27 @@ fn unsupported_vertex_formats_are_rejected() {
         vk::Format::from_raw(0x7fff_ffff),
     ] {
         let g = one_triangle_geometry(format, vk::IndexType::NONE_KHR, &data, None);
-        let range = BuildRangeInfo { primitive_count: 1, ..Default::default() };
-        let err = build(&device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, blas_flags(), &g, &[range]).unwrap_err();
-        assert!(matches!(err, hostas::Error::Validation { .. }), "{format:?}: {err:?}");
-        assert_eq!(err.vuid_str(), Some("VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexFormat-03797"), "{format:?}");
+        let range = BuildRangeInfo {
+            primitive_count: 1,
+            ..Default::default()
+        };
+        let err = build(
+            &device,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            blas_flags(),
+            &g,
+            &[range],
+        )
+        .unwrap_err();
+        assert!(
+            matches!(err, hostas::Error::Validation { .. }),
+            "{format:?}: {err:?}"
+        );
+        assert_eq!(
+            err.vuid_str(),
+            Some("VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexFormat-03797"),
+            "{format:?}"
+        );
         assert_eq!(err.location().unwrap().geometry, Some(0), "{format:?}");
     }
 }
@@ -613,7 +769,10 @@ const INACTIVE_BOX: usize = 2;
 /// box), with its own dyadic half extents.
 fn box_of(i: usize) -> ([f32; 3], [f32; 3]) {
     let c = 3.0 * i as f32;
-    ([c, c, c], [0.5 + 0.125 * i as f32, 0.75, 0.25 + 0.0625 * i as f32])
+    (
+        [c, c, c],
+        [0.5 + 0.125 * i as f32, 0.75, 0.25 + 0.0625 * i as f32],
+    )
 }
 
 #[test]
@@ -624,7 +783,14 @@ fn aabbs_with_strides_and_offsets() {
             let mut data = Unaligned::new(offset + (BOXES - 1) * stride + 24, 0xee);
             for i in 0..BOXES {
                 let (c, h) = box_of(i);
-                let mut v = [c[0] - h[0], c[1] - h[1], c[2] - h[2], c[0] + h[0], c[1] + h[1], c[2] + h[2]];
+                let mut v = [
+                    c[0] - h[0],
+                    c[1] - h[1],
+                    c[2] - h[2],
+                    c[0] + h[0],
+                    c[1] + h[1],
+                    c[2] + h[2],
+                ];
                 if i == INACTIVE_BOX {
                     // Inactive: minX is NaN; the other bounds are garbage (max < min).
                     v = [f32::NAN, 5.0, 5.0, -5.0, -5.0, -5.0];
@@ -634,10 +800,26 @@ fn aabbs_with_strides_and_offsets() {
                     data.bytes_mut()[at..at + 4].copy_from_slice(&x.to_le_bytes());
                 }
             }
-            let g = Geometry::aabbs(AabbsData { data: data.bytes(), stride: stride as u64 }, vk::GeometryFlagsKHR::empty());
-            let range = BuildRangeInfo { primitive_count: BOXES as u32, primitive_offset: offset as u32, ..Default::default() };
-            let blas = build(&device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, blas_flags(), &[g], &[range])
-                .unwrap_or_else(|e| panic!("stride {stride} offset {offset}: {e}"));
+            let g = Geometry::aabbs(
+                AabbsData {
+                    data: data.bytes(),
+                    stride: stride as u64,
+                },
+                vk::GeometryFlagsKHR::empty(),
+            );
+            let range = BuildRangeInfo {
+                primitive_count: BOXES as u32,
+                primitive_offset: offset as u32,
+                ..Default::default()
+            };
+            let blas = build(
+                &device,
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                blas_flags(),
+                &[g],
+                &[range],
+            )
+            .unwrap_or_else(|e| panic!("stride {stride} offset {offset}: {e}"));
             let tlas = hostas::quick::build_single_instance_tlas(&device, blas).expect("tlas");
             let scene = device.scene(tlas).expect("scene");
             for i in 0..BOXES {
@@ -646,14 +828,24 @@ fn aabbs_with_strides_and_offsets() {
                     for sign in [-1.0f32, 1.0] {
                         let mut dir = [0.0f32; 3];
                         dir[axis] = sign;
-                        let origin = [c[0] - 100.0 * dir[0], c[1] - 100.0 * dir[1], c[2] - 100.0 * dir[2]];
+                        let origin = [
+                            c[0] - 100.0 * dir[0],
+                            c[1] - 100.0 * dir[1],
+                            c[2] - 100.0 * dir[2],
+                        ];
                         let mut q = scene.ray_query(&Ray::new(origin, dir)).expect("query");
                         let mut seen = Vec::new();
                         while q.proceed() {
                             assert_eq!(q.candidate_type(), Some(CandidateType::Aabb));
-                            seen.push((q.candidate().primitive_index, q.candidate().geometry_index, q.candidate().t));
+                            seen.push((
+                                q.candidate().primitive_index,
+                                q.candidate().geometry_index,
+                                q.candidate().t,
+                            ));
                         }
-                        let what = format!("stride {stride} offset {offset} box {i} axis {axis} sign {sign}");
+                        let what = format!(
+                            "stride {stride} offset {offset} box {i} axis {axis} sign {sign}"
+                        );
                         if i == INACTIVE_BOX {
                             assert!(seen.is_empty(), "{what}: inactive box reported {seen:?}");
                             continue;
@@ -664,7 +856,10 @@ fn aabbs_with_strides_and_offsets() {
                         // The entry distance reveals the bound on this axis and side (the box
                         // may be grown conservatively by a few ulps, hence the tolerance).
                         let expect = 100.0 - h[axis];
-                        assert!((t - expect).abs() <= 1e-3, "{what}: entry t {t}, expected {expect}");
+                        assert!(
+                            (t - expect).abs() <= 1e-3,
+                            "{what}: entry t {t}, expected {expect}"
+                        );
                     }
                 }
             }
@@ -677,7 +872,14 @@ fn aabbs_with_strides_and_offsets() {
 // ---------------------------------------------------------------------------------------------
 
 /// This file's own encoder of `VkAccelerationStructureInstanceKHR`.
-fn encode_instance(rows: [f32; 12], custom: u32, mask: u8, sbt: u32, flags: u8, reference: u64) -> [u8; 64] {
+fn encode_instance(
+    rows: [f32; 12],
+    custom: u32,
+    mask: u8,
+    sbt: u32,
+    flags: u8,
+    reference: u64,
+) -> [u8; 64] {
     let mut out = [0u8; 64];
     for (i, v) in rows.iter().enumerate() {
         out[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
@@ -690,7 +892,9 @@ fn encode_instance(rows: [f32; 12], custom: u32, mask: u8, sbt: u32, flags: u8, 
 
 #[test]
 fn instance_decode_of_hand_written_bytes() {
-    let rows = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0f32];
+    let rows = [
+        1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0, 12.0f32,
+    ];
     let mut bytes = [0u8; 64];
     for (i, v) in rows.iter().enumerate() {
         bytes[4 * i..4 * i + 4].copy_from_slice(&v.to_le_bytes());
@@ -706,7 +910,17 @@ fn instance_decode_of_hand_written_bytes() {
     assert_eq!(inst.acceleration_structure_reference, 0x0123_4567_89ab_cd00);
     assert_eq!(inst.transform.to_rows(), rows);
     // The same bytes from this file's encoder, and back through the library's.
-    assert_eq!(encode_instance(rows, 0x12_3456, 0xab, 0x65_4321, 0xcd, 0x0123_4567_89ab_cd00), bytes);
+    assert_eq!(
+        encode_instance(
+            rows,
+            0x12_3456,
+            0xab,
+            0x65_4321,
+            0xcd,
+            0x0123_4567_89ab_cd00
+        ),
+        bytes
+    );
     assert_eq!(inst.encode(), bytes);
     // Unaligned input, and too-short input.
     let mut shifted = [0u8; 67];
@@ -722,7 +936,10 @@ const INACTIVE_INSTANCE: usize = 1;
 fn instance_flags(i: usize) -> u8 {
     let f = match i {
         0 => vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE,
-        2 => vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+        2 => {
+            vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE
+                | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE
+        }
         3 => vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING,
         _ => vk::GeometryInstanceFlagsKHR::empty(),
     };
@@ -732,8 +949,19 @@ fn instance_flags(i: usize) -> u8 {
 fn instance_bytes(i: usize, blas: AccelerationStructure) -> [u8; 64] {
     let x = 10.0 * i as f32;
     let rows = [1.0, 0.0, 0.0, x, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
-    let reference = if i == INACTIVE_INSTANCE { 0 } else { blas.device_address() };
-    encode_instance(rows, 0x80_7f00 + i as u32, 0x80 | (1 << i), 0xa5_a500 + i as u32, instance_flags(i), reference)
+    let reference = if i == INACTIVE_INSTANCE {
+        0
+    } else {
+        blas.device_address()
+    };
+    encode_instance(
+        rows,
+        0x80_7f00 + i as u32,
+        0x80 | (1 << i),
+        0xa5_a500 + i as u32,
+        instance_flags(i),
+        reference,
+    )
 }
 
 fn check_instance_scene(device: &Device, tlas: AccelerationStructure, what: &str) {
@@ -741,34 +969,57 @@ fn check_instance_scene(device: &Device, tlas: AccelerationStructure, what: &str
     let mut front = [None; INSTANCES];
     for (i, front) in front.iter_mut().enumerate() {
         let x = 10.0 * i as f32;
-        let ray = Ray { cull_mask: 0x80, ..Ray::new([x, -0.2, 5.0], [0.0, 0.0, -1.0]) };
+        let ray = Ray {
+            cull_mask: 0x80,
+            ..Ray::new([x, -0.2, 5.0], [0.0, 0.0, -1.0])
+        };
         let mut q = scene.ray_query(&ray).expect("query");
         let stopped = q.proceed();
         if i == INACTIVE_INSTANCE {
-            assert!(!stopped && q.committed_type() == CommittedType::None, "{what}: inactive instance hit");
+            assert!(
+                !stopped && q.committed_type() == CommittedType::None,
+                "{what}: inactive instance hit"
+            );
             continue;
         }
         // Instance 0 forces opacity: committed inside proceed. The others are non-opaque (the
         // geometry is, and instance 2 forces it): they stop as candidates.
         let c = if i == 0 {
-            assert!(!stopped, "{what}: FORCE_OPAQUE instance stopped as a candidate");
+            assert!(
+                !stopped,
+                "{what}: FORCE_OPAQUE instance stopped as a candidate"
+            );
             assert_eq!(q.committed_type(), CommittedType::Triangle, "{what}");
             *q.committed()
         } else {
             assert!(stopped, "{what}: instance {i} did not stop as a candidate");
-            assert!(!q.candidate().opaque, "{what}: instance {i} candidate is opaque");
+            assert!(
+                !q.candidate().opaque,
+                "{what}: instance {i} candidate is opaque"
+            );
             *q.candidate()
         };
-        assert_eq!(c.instance_id, i as u32, "{what}: InstanceId counts inactive instances");
+        assert_eq!(
+            c.instance_id, i as u32,
+            "{what}: InstanceId counts inactive instances"
+        );
         assert_eq!(c.instance_custom_index, 0x80_7f00 + i as u32, "{what}");
         assert_eq!(c.sbt_record_offset, 0xa5_a500 + i as u32, "{what}");
         assert_eq!((c.geometry_index, c.primitive_index), (0, 0), "{what}");
         *front = Some(c.front_face);
         // Masks: only bit i and bit 7 are set in instance i's mask.
         for j in 0..7 {
-            let ray = Ray { cull_mask: 1 << j, ..ray };
+            let ray = Ray {
+                cull_mask: 1 << j,
+                ..ray
+            };
             let hit = scene.trace_closest(&ray).expect("trace");
-            assert_eq!(hit.is_hit(), j == i, "{what}: instance {i} with cull mask {:#x}", 1 << j);
+            assert_eq!(
+                hit.is_hit(),
+                j == i,
+                "{what}: instance {i} with cull mask {:#x}",
+                1 << j
+            );
         }
     }
     // TRIANGLE_FLIP_FACING on instance 3 inverts the facing seen on instance 2.
@@ -776,10 +1027,21 @@ fn check_instance_scene(device: &Device, tlas: AccelerationStructure, what: &str
     assert_ne!(front[2], front[3], "{what}: TRIANGLE_FLIP_FACING ignored");
     // TRIANGLE_FACING_CULL_DISABLE on instance 2: culling the facing instance 0 shows is ignored
     // there but not on instance 0.
-    let cull = if front[0] == Some(true) { RayFlags::CULL_FRONT_FACING_TRIANGLES } else { RayFlags::CULL_BACK_FACING_TRIANGLES };
+    let cull = if front[0] == Some(true) {
+        RayFlags::CULL_FRONT_FACING_TRIANGLES
+    } else {
+        RayFlags::CULL_BACK_FACING_TRIANGLES
+    };
     for (i, expect_hit) in [(0usize, false), (2, true)] {
-        let ray = Ray { flags: cull, ..Ray::new([10.0 * i as f32, -0.2, 5.0], [0.0, 0.0, -1.0]) };
-        assert_eq!(scene.trace_closest(&ray).expect("trace").is_hit(), expect_hit, "{what}: facing cull on instance {i}");
+        let ray = Ray {
+            flags: cull,
+            ..Ray::new([10.0 * i as f32, -0.2, 5.0], [0.0, 0.0, -1.0])
+        };
+        assert_eq!(
+            scene.trace_closest(&ray).expect("trace").is_hit(),
+            expect_hit,
+            "{what}: facing cull on instance {i}"
+        );
     }
 }
 
@@ -797,8 +1059,18 @@ fn instance_blas(device: &Device) -> AccelerationStructure {
         },
         vk::GeometryFlagsKHR::empty(),
     );
-    let range = BuildRangeInfo { primitive_count: 1, ..Default::default() };
-    build(device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, blas_flags(), &[g], &[range]).expect("blas")
+    let range = BuildRangeInfo {
+        primitive_count: 1,
+        ..Default::default()
+    };
+    build(
+        device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        blas_flags(),
+        &[g],
+        &[range],
+    )
+    .expect("blas")
 }
 
 #[test]
@@ -808,12 +1080,26 @@ fn instances_as_array_with_offset() {
     for offset in [0usize, 16, 80] {
         let mut data = Unaligned::new(offset + 64 * INSTANCES, 0x77);
         for i in 0..INSTANCES {
-            data.bytes_mut()[offset + 64 * i..offset + 64 * (i + 1)].copy_from_slice(&instance_bytes(i, blas));
+            data.bytes_mut()[offset + 64 * i..offset + 64 * (i + 1)]
+                .copy_from_slice(&instance_bytes(i, blas));
         }
-        let g = Geometry::instances(InstancesData::Array(data.bytes()), vk::GeometryFlagsKHR::empty());
-        let range = BuildRangeInfo { primitive_count: INSTANCES as u32, primitive_offset: offset as u32, ..Default::default() };
-        let tlas = build(&device, vk::AccelerationStructureTypeKHR::TOP_LEVEL, vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE, &[g], &[range])
-            .expect("tlas");
+        let g = Geometry::instances(
+            InstancesData::Array(data.bytes()),
+            vk::GeometryFlagsKHR::empty(),
+        );
+        let range = BuildRangeInfo {
+            primitive_count: INSTANCES as u32,
+            primitive_offset: offset as u32,
+            ..Default::default()
+        };
+        let tlas = build(
+            &device,
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+            &[g],
+            &[range],
+        )
+        .expect("tlas");
         check_instance_scene(&device, tlas, &format!("array, primitiveOffset {offset}"));
     }
 }
@@ -835,10 +1121,27 @@ fn instances_as_pointers_with_offset() {
         // primitiveOffset indexes the pointer array in bytes: 16 skips two pointers.
         let mut ptrs: Vec<&[u8]> = garbage[..skipped].iter().map(|g| g.bytes()).collect();
         ptrs.extend(records.iter().map(|r| r.bytes()));
-        let g = Geometry::instances(InstancesData::Pointers(&ptrs), vk::GeometryFlagsKHR::empty());
-        let range = BuildRangeInfo { primitive_count: INSTANCES as u32, primitive_offset: 8 * skipped as u32, ..Default::default() };
-        let tlas = build(&device, vk::AccelerationStructureTypeKHR::TOP_LEVEL, vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE, &[g], &[range])
-            .expect("tlas");
-        check_instance_scene(&device, tlas, &format!("pointers, primitiveOffset {}", 8 * skipped));
+        let g = Geometry::instances(
+            InstancesData::Pointers(&ptrs),
+            vk::GeometryFlagsKHR::empty(),
+        );
+        let range = BuildRangeInfo {
+            primitive_count: INSTANCES as u32,
+            primitive_offset: 8 * skipped as u32,
+            ..Default::default()
+        };
+        let tlas = build(
+            &device,
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE,
+            &[g],
+            &[range],
+        )
+        .expect("tlas");
+        check_instance_scene(
+            &device,
+            tlas,
+            &format!("pointers, primitiveOffset {}", 8 * skipped),
+        );
     }
 }

@@ -9,7 +9,10 @@
 mod checks;
 
 use hostas::commands::SerializedHeader;
-use hostas::{AccelerationStructureCreateInfo, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, InstancesData, vk};
+use hostas::{
+    AccelerationStructureCreateInfo, BuildGeometryInfo, BuildRangeInfo, Device, Geometry,
+    InstancesData, vk,
+};
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
@@ -24,27 +27,45 @@ fn replay(kind: &str) -> usize {
         eprintln!("{} does not exist: nothing to replay", root.display());
         return 0;
     };
-    let mut dirs: Vec<PathBuf> = dirs.filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_dir()).collect();
+    let mut dirs: Vec<PathBuf> = dirs
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_dir())
+        .collect();
     dirs.sort();
     let mut ran = 0;
     let mut failures = Vec::new();
     for dir in dirs {
-        let name = dir.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_owned();
+        let name = dir
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default()
+            .to_owned();
         let Some(run) = checks::target(&name) else {
             eprintln!("{}: no target named {name}, skipped", dir.display());
             continue;
         };
-        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir).into_iter().flatten().filter_map(|e| e.ok().map(|e| e.path())).filter(|p| p.is_file()).collect();
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .into_iter()
+            .flatten()
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_file())
+            .collect();
         files.sort();
         for f in files {
-            let Ok(bytes) = std::fs::read(&f) else { continue };
+            let Ok(bytes) = std::fs::read(&f) else {
+                continue;
+            };
             ran += 1;
             if std::panic::catch_unwind(|| run(&bytes)).is_err() {
                 failures.push(f.display().to_string());
             }
         }
     }
-    assert!(failures.is_empty(), "fuzz inputs that fail their target's checks:\n  {}", failures.join("\n  "));
+    assert!(
+        failures.is_empty(),
+        "fuzz inputs that fail their target's checks:\n  {}",
+        failures.join("\n  ")
+    );
     ran
 }
 
@@ -68,22 +89,31 @@ fn fresh_serialized_structures_pass_the_deserialize_checks() {
     for (i, (name, bytes)) in checks::seeds::deserialize_seeds().into_iter().enumerate() {
         let header = SerializedHeader::parse(&bytes).expect("a seed parses");
         assert_eq!(header.serialized_size, bytes.len() as u64, "{name}");
-        assert!(Device::new().deserialize(&bytes).is_ok(), "{name} deserializes");
-        let inputs = std::iter::once(bytes.clone()).chain(checks::seeds::mutations(&bytes, 400, i as u64));
+        assert!(
+            Device::new().deserialize(&bytes).is_ok(),
+            "{name} deserializes"
+        );
+        let inputs =
+            std::iter::once(bytes.clone()).chain(checks::seeds::mutations(&bytes, 400, i as u64));
         for (k, input) in inputs.enumerate() {
             if std::panic::catch_unwind(|| checks::deserialize::run(&input)).is_err() {
                 failures.push(format!("{name} mutation {k}"));
             }
         }
     }
-    assert!(failures.is_empty(), "deserialize checks failed for: {failures:?}");
+    assert!(
+        failures.is_empty(),
+        "deserialize checks failed for: {failures:?}"
+    );
 }
 
 /// The decoder is deterministic and total: any bytes decode, the same bytes the same way.
 #[test]
 fn build_inputs_decoding_is_deterministic() {
     for seed in 0..64u64 {
-        let bytes: Vec<u8> = (0..seed * 7).map(|i| (i.wrapping_mul(2654435761) >> 7) as u8 ^ seed as u8).collect();
+        let bytes: Vec<u8> = (0..seed * 7)
+            .map(|i| (i.wrapping_mul(2654435761) >> 7) as u8 ^ seed as u8)
+            .collect();
         let a = format!("{:?}", checks::build_inputs::Case::decode(&bytes));
         let b = format!("{:?}", checks::build_inputs::Case::decode(&bytes));
         assert_eq!(a, b);
@@ -93,7 +123,13 @@ fn build_inputs_decoding_is_deterministic() {
 /// A serialized header (with this build's UUIDs) followed by nothing.
 fn bare_header(deserialized_size: u64) -> Vec<u8> {
     let device = Device::new();
-    let blas = hostas::quick::build_triangle_blas(&device, &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[[0, 1, 2]], Default::default()).unwrap();
+    let blas = hostas::quick::build_triangle_blas(
+        &device,
+        &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        &[[0, 1, 2]],
+        Default::default(),
+    )
+    .unwrap();
     let mut bytes = device.serialize(blas).unwrap();
     bytes.truncate(56);
     bytes[32..40].copy_from_slice(&u64::MAX.to_le_bytes());
@@ -112,7 +148,10 @@ fn deserialize_allocates_before_validating() {
     // allocating: the input is too short, whatever the size it claims.
     let device = Device::new();
     let e = device.deserialize(&bare_header(1 << 62)).unwrap_err();
-    assert!(matches!(e, hostas::Error::RangeTooShort { .. }), "expected RangeTooShort for a 56-byte input, got {e:?}");
+    assert!(
+        matches!(e, hostas::Error::RangeTooShort { .. }),
+        "expected RangeTooShort for a 56-byte input, got {e:?}"
+    );
 }
 
 /// The small-size side of the same path is fine today (kept green).
@@ -125,12 +164,16 @@ fn deserialize_short_input_is_rejected() {
 }
 
 /// Runs `f` on a thread; fails if it does not finish within `limit`.
-fn finishes_within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + Send + 'static) -> T {
+fn finishes_within<T: Send + 'static>(
+    limit: Duration,
+    f: impl FnOnce() -> T + Send + 'static,
+) -> T {
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let _ = tx.send(f());
     });
-    rx.recv_timeout(limit).unwrap_or_else(|_| panic!("did not finish within {limit:?}"))
+    rx.recv_timeout(limit)
+        .unwrap_or_else(|_| panic!("did not finish within {limit:?}"))
 }
 
 /// Was a bug (hang, fixed in 74ed721): `build_acceleration_structures`
@@ -143,27 +186,76 @@ fn finishes_within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + S
 fn huge_instance_count_hangs_the_reference_check() {
     let r = finishes_within(Duration::from_secs(5), || {
         let device = Device::new();
-        let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::TOP_LEVEL, 4096)).unwrap();
-        let geoms = [Geometry::instances(InstancesData::Array(&[]), vk::GeometryFlagsKHR::empty())];
+        let dst = device
+            .create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+                vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                4096,
+            ))
+            .unwrap();
+        let geoms = [Geometry::instances(
+            InstancesData::Array(&[]),
+            vk::GeometryFlagsKHR::empty(),
+        )];
         let mut scratch = vec![0u8; 4096];
-        let info = BuildGeometryInfo::build(vk::AccelerationStructureTypeKHR::TOP_LEVEL, Default::default(), &geoms, dst, &mut scratch);
-        let range = [BuildRangeInfo { primitive_count: u32::MAX, ..Default::default() }];
-        device.build_acceleration_structures(&mut [info], &[&range]).is_err()
+        let info = BuildGeometryInfo::build(
+            vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+            Default::default(),
+            &geoms,
+            dst,
+            &mut scratch,
+        );
+        let range = [BuildRangeInfo {
+            primitive_count: u32::MAX,
+            ..Default::default()
+        }];
+        device
+            .build_acceleration_structures(&mut [info], &[&range])
+            .is_err()
     });
     assert!(r, "the build must fail");
 }
 
 /// A BLAS of AABBs (`spread` apart) in `geometries` geometries, built with ALLOW_UPDATE.
-fn aabb_blas(device: &Device, boxes_per_geometry: usize, geometries: usize, spread: f32, flags: vk::BuildAccelerationStructureFlagsKHR) -> (hostas::AccelerationStructure, Vec<u8>) {
+fn aabb_blas(
+    device: &Device,
+    boxes_per_geometry: usize,
+    geometries: usize,
+    spread: f32,
+    flags: vk::BuildAccelerationStructureFlagsKHR,
+) -> (hostas::AccelerationStructure, Vec<u8>) {
     let boxes: Vec<u8> = (0..boxes_per_geometry)
         .flat_map(|i| {
             let c = i as f32 * spread;
-            [c, 0.0, 0.0, c + 0.5, 0.5, 0.5].into_iter().flat_map(f32::to_le_bytes)
+            [c, 0.0, 0.0, c + 0.5, 0.5, 0.5]
+                .into_iter()
+                .flat_map(f32::to_le_bytes)
         })
         .collect();
-    let geoms: Vec<Geometry> = (0..geometries).map(|_| Geometry::aabbs(hostas::AabbsData { data: &boxes, stride: 24 }, vk::GeometryFlagsKHR::empty())).collect();
-    let ranges: Vec<BuildRangeInfo> = (0..geometries).map(|_| BuildRangeInfo { primitive_count: boxes_per_geometry as u32, ..Default::default() }).collect();
-    let a = hostas::quick::build(device, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, flags | vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE, &geoms, &ranges).unwrap();
+    let geoms: Vec<Geometry> = (0..geometries)
+        .map(|_| {
+            Geometry::aabbs(
+                hostas::AabbsData {
+                    data: &boxes,
+                    stride: 24,
+                },
+                vk::GeometryFlagsKHR::empty(),
+            )
+        })
+        .collect();
+    let ranges: Vec<BuildRangeInfo> = (0..geometries)
+        .map(|_| BuildRangeInfo {
+            primitive_count: boxes_per_geometry as u32,
+            ..Default::default()
+        })
+        .collect();
+    let a = hostas::quick::build(
+        device,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        flags | vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+        &geoms,
+        &ranges,
+    )
+    .unwrap();
     (a, boxes)
 }
 
@@ -176,8 +268,21 @@ fn aabb_blas(device: &Device, boxes_per_geometry: usize, geometries: usize, spre
 fn update_with_huge_counts_overflows() {
     let device = Device::new();
     let (a, boxes) = aabb_blas(&device, 4, 2, 1.0, Default::default());
-    let geoms: Vec<Geometry> = (0..2).map(|_| Geometry::aabbs(hostas::AabbsData { data: &boxes, stride: 24 }, vk::GeometryFlagsKHR::empty())).collect();
-    let ranges = [BuildRangeInfo { primitive_count: 1 << 31, ..Default::default() }; 2];
+    let geoms: Vec<Geometry> = (0..2)
+        .map(|_| {
+            Geometry::aabbs(
+                hostas::AabbsData {
+                    data: &boxes,
+                    stride: 24,
+                },
+                vk::GeometryFlagsKHR::empty(),
+            )
+        })
+        .collect();
+    let ranges = [BuildRangeInfo {
+        primitive_count: 1 << 31,
+        ..Default::default()
+    }; 2];
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut scratch = vec![0u8; 4096];
         let info = BuildGeometryInfo {
@@ -191,7 +296,10 @@ fn update_with_huge_counts_overflows() {
         };
         device.build_acceleration_structures(&mut [info], &[&ranges])
     }));
-    assert!(matches!(r, Ok(Err(_))), "the update must fail with an error, not a panic");
+    assert!(
+        matches!(r, Ok(Err(_))),
+        "the update must fail with an error, not a panic"
+    );
 }
 
 /// Was a bug (panic, fixed in 74ed721): deserialization (`View::parse`) accepted geometry
@@ -207,15 +315,21 @@ fn update_refits_with_the_new_geometry_type() {
     let device = Device::new();
     // 60 identical boxes, LOW_MEMORY: leaves of 15 under two nodes, so the structure ends
     // before 36 bytes per box past the start of its primitive section.
-    let flags = vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE | vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY;
+    let flags = vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE
+        | vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY;
     let (a, _) = aabb_blas(&device, 60, 1, 0.0, flags);
     assert!(device.statistics(a).unwrap().node_count <= 2);
     let mut bytes = device.serialize(a).unwrap();
     // The first geometry record: header 56, structure header 256; type at +12, format at +16.
     let rec = 56 + 256;
-    assert_eq!(u32::from_le_bytes(bytes[rec + 12..rec + 16].try_into().unwrap()), vk::GeometryTypeKHR::AABBS.as_raw() as u32);
-    bytes[rec + 12..rec + 16].copy_from_slice(&(vk::GeometryTypeKHR::TRIANGLES.as_raw() as u32).to_le_bytes());
-    bytes[rec + 16..rec + 20].copy_from_slice(&(vk::Format::R32G32B32_SFLOAT.as_raw() as u32).to_le_bytes());
+    assert_eq!(
+        u32::from_le_bytes(bytes[rec + 12..rec + 16].try_into().unwrap()),
+        vk::GeometryTypeKHR::AABBS.as_raw() as u32
+    );
+    bytes[rec + 12..rec + 16]
+        .copy_from_slice(&(vk::GeometryTypeKHR::TRIANGLES.as_raw() as u32).to_le_bytes());
+    bytes[rec + 16..rec + 20]
+        .copy_from_slice(&(vk::Format::R32G32B32_SFLOAT.as_raw() as u32).to_le_bytes());
     let Ok(b) = device.deserialize(&bytes) else {
         return; // Fixed by rejecting the records at deserialization.
     };
@@ -234,7 +348,10 @@ fn update_refits_with_the_new_geometry_type() {
         },
         vk::GeometryFlagsKHR::empty(),
     )];
-    let ranges = [BuildRangeInfo { primitive_count: 60, ..Default::default() }];
+    let ranges = [BuildRangeInfo {
+        primitive_count: 60,
+        ..Default::default()
+    }];
     let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
         let mut scratch = vec![0u8; 4096];
         let info = BuildGeometryInfo {
@@ -248,7 +365,10 @@ fn update_refits_with_the_new_geometry_type() {
         };
         device.build_acceleration_structures(&mut [info], &[&ranges])
     }));
-    assert!(matches!(r, Ok(Err(_))), "the update must be refused (source holds AABBs): {r:?}");
+    assert!(
+        matches!(r, Ok(Err(_))),
+        "the update must be refused (source holds AABBs): {r:?}"
+    );
 }
 
 /// Was a bug (unbounded allocation, fixed in 74ed721): a top-level structure's handle list is
@@ -260,18 +380,40 @@ fn update_refits_with_the_new_geometry_type() {
 #[test]
 fn serialization_size_of_scribbled_tlas() {
     let device = Device::new();
-    let blas = hostas::quick::build_triangle_blas(&device, &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], &[[0, 1, 2]], Default::default()).unwrap();
+    let blas = hostas::quick::build_triangle_blas(
+        &device,
+        &[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        &[[0, 1, 2]],
+        Default::default(),
+    )
+    .unwrap();
     // An empty TLAS (no active instance), then its counts raised to 2^26 (a 512 MiB list).
-    let tlas = hostas::quick::build_tlas(&device, &[hostas::Instance { acceleration_structure_reference: 0, ..hostas::quick::instance(blas, hostas::Affine::IDENTITY) }], Default::default()).unwrap();
+    let tlas = hostas::quick::build_tlas(
+        &device,
+        &[hostas::Instance {
+            acceleration_structure_reference: 0,
+            ..hostas::quick::instance(blas, hostas::Affine::IDENTITY)
+        }],
+        Default::default(),
+    )
+    .unwrap();
     let (buffer, offset, _) = device.placement(tlas).unwrap();
     let count: u32 = 1 << 26;
     buffer.write(offset + 24, &count.to_le_bytes()).unwrap(); // Header::primitive_count
     let mut geometries_offset = [0u8; 8];
     buffer.read(offset + 88, &mut geometries_offset).unwrap();
     let geometries_offset = u64::from_le_bytes(geometries_offset);
-    buffer.write(offset + geometries_offset + 4, &count.to_le_bytes()).unwrap(); // GeometryRecord::primitive_count
-    let size = device.acceleration_structure_property(tlas, vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR);
-    assert!(size.is_err(), "a TLAS claiming {count} instances (> maxInstanceCount) was accepted: serialization size {size:?}");
+    buffer
+        .write(offset + geometries_offset + 4, &count.to_le_bytes())
+        .unwrap(); // GeometryRecord::primitive_count
+    let size = device.acceleration_structure_property(
+        tlas,
+        vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR,
+    );
+    assert!(
+        size.is_err(),
+        "a TLAS claiming {count} instances (> maxInstanceCount) was accepted: serialization size {size:?}"
+    );
     assert!(device.serialize(tlas).is_err());
     assert!(device.statistics(tlas).is_err());
 }
@@ -287,8 +429,23 @@ fn zero_direction_ray_hits_boxes_at_infinity() {
     let device = Device::new();
     // A box the origin is below of in z, and a second box under the origin, so that the node
     // holding both contains the origin and is entered.
-    let boxes = [hostas::Aabb { lo: [0.25, 0.25, 0.25], hi: [0.75, 0.75, 1.0] }, hostas::Aabb { lo: [0.4, 0.4, -0.2], hi: [0.6, 0.6, -0.1] }];
-    let blas = hostas::quick::build_aabb_blas(&device, &boxes, vk::GeometryFlagsKHR::OPAQUE, Default::default()).unwrap();
+    let boxes = [
+        hostas::Aabb {
+            lo: [0.25, 0.25, 0.25],
+            hi: [0.75, 0.75, 1.0],
+        },
+        hostas::Aabb {
+            lo: [0.4, 0.4, -0.2],
+            hi: [0.6, 0.6, -0.1],
+        },
+    ];
+    let blas = hostas::quick::build_aabb_blas(
+        &device,
+        &boxes,
+        vk::GeometryFlagsKHR::OPAQUE,
+        Default::default(),
+    )
+    .unwrap();
     let tlas = hostas::quick::build_single_instance_tlas(&device, blas).unwrap();
     let scene = device.scene(tlas).unwrap();
     let ray = hostas::Ray::new([0.5, 0.5, 0.0], [0.0, 0.0, 0.0]);
@@ -299,5 +456,8 @@ fn zero_direction_ray_hits_boxes_at_infinity() {
         candidates.push(*q.candidate());
     }
     let hit = scene.trace_closest(&ray).unwrap();
-    assert!(candidates.is_empty() && !hit.is_hit(), "the ray's only point is the origin, inside no box; candidates: {candidates:?}, closest hit {hit:?}");
+    assert!(
+        candidates.is_empty() && !hit.is_hit(),
+        "the ray's only point is the origin, inside no box; candidates: {candidates:?}, closest hit {hit:?}"
+    );
 }

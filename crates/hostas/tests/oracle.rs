@@ -22,13 +22,22 @@ const PRESETS: [vk::BuildAccelerationStructureFlagsKHR; 4] = [
 const AABB_EPS: f64 = 1e-5;
 
 /// Checks the committed closest hit and the candidate set of `rays` rays against the oracle.
-fn check_scene(seed: u64, desc: &SceneDesc, rays: usize, r: &mut Rand) -> Result<(), TestCaseError> {
+fn check_scene(
+    seed: u64,
+    desc: &SceneDesc,
+    rays: usize,
+    r: &mut Rand,
+) -> Result<(), TestCaseError> {
     let device = Device::new();
     let oracle = Oracle::new(desc);
     for (pi, preset) in PRESETS.iter().enumerate() {
         let tlas_preset = PRESETS[(pi + seed as usize) % 4];
-        let built = desc.build(&device, *preset, tlas_preset).map_err(|e| TestCaseError::fail(format!("build: {e}")))?;
-        let scene = device.scene(built.tlas).map_err(|e| TestCaseError::fail(format!("scene: {e}")))?;
+        let built = desc
+            .build(&device, *preset, tlas_preset)
+            .map_err(|e| TestCaseError::fail(format!("build: {e}")))?;
+        let scene = device
+            .scene(built.tlas)
+            .map_err(|e| TestCaseError::fail(format!("scene: {e}")))?;
         for _ in 0..rays {
             let mut ray = generate::random_ray(r, desc);
             ray.flags = generate::random_flags(r);
@@ -41,31 +50,57 @@ fn check_scene(seed: u64, desc: &SceneDesc, rays: usize, r: &mut Rand) -> Result
     Ok(())
 }
 
-fn check_closest(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk::BuildAccelerationStructureFlagsKHR) -> Result<(), TestCaseError> {
-    let hit = scene.trace_closest(ray).map_err(|e| TestCaseError::fail(format!("trace: {e}")))?;
+fn check_closest(
+    scene: &hostas::Scene,
+    oracle: &Oracle,
+    ray: &Ray,
+    preset: &vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<(), TestCaseError> {
+    let hit = scene
+        .trace_closest(ray)
+        .map_err(|e| TestCaseError::fail(format!("trace: {e}")))?;
     // The batch tracer and the ray-query state machine (accepting everything) agree exactly.
-    let via_query = scene.trace_with(ray, |_| true, |q| Some(q.candidate().t)).map_err(|e| TestCaseError::fail(format!("query: {e}")))?;
+    let via_query = scene
+        .trace_with(ray, |_| true, |q| Some(q.candidate().t))
+        .map_err(|e| TestCaseError::fail(format!("query: {e}")))?;
     prop_assert_eq!(hit, via_query, "tracer and ray query differ for {:?}", ray);
     let expected = oracle.closest(ray);
     match (hit.kind, expected) {
         (HitKind::Miss, None) => {}
         (HitKind::Miss, Some((t, c))) => {
             // Only a near-miss box may be missed... no: boxes are never missed, triangles never.
-            prop_assert!(false, "preset {preset:?}: hostas missed, oracle hit {:?} at t {t} for {ray:?}", c[0]);
+            prop_assert!(
+                false,
+                "preset {preset:?}: hostas missed, oracle hit {:?} at t {t} for {ray:?}",
+                c[0]
+            );
         }
         (_, None) => {
             // Allowed only for a box the oracle sees as a near miss.
             let near = oracle.candidates(ray, AABB_EPS);
             prop_assert!(
-                hit.kind == HitKind::Generated && near.iter().any(|c| c.kind == CandidateKind::Aabb && c.primitive_index == hit.primitive_index),
+                hit.kind == HitKind::Generated
+                    && near.iter().any(|c| c.kind == CandidateKind::Aabb
+                        && c.primitive_index == hit.primitive_index),
                 "preset {preset:?}: hostas hit {hit:?}, oracle misses, for {ray:?}"
             );
         }
         (kind, Some((t, tied))) => {
             let key = (hit.instance_id, hit.geometry_index, hit.primitive_index);
             if kind == HitKind::Triangle {
-                prop_assert_eq!(hit.t as f64, t, "preset {:?}: t differs for {:?}: hostas {:?}, oracle {:?}", preset, ray, hit, tied);
-                prop_assert!(tied.iter().any(|c| c.key() == key), "preset {preset:?}: hit {hit:?} is not among the oracle's closest {tied:?}");
+                prop_assert_eq!(
+                    hit.t as f64,
+                    t,
+                    "preset {:?}: t differs for {:?}: hostas {:?}, oracle {:?}",
+                    preset,
+                    ray,
+                    hit,
+                    tied
+                );
+                prop_assert!(
+                    tied.iter().any(|c| c.key() == key),
+                    "preset {preset:?}: hit {hit:?} is not among the oracle's closest {tied:?}"
+                );
                 let c = tied.iter().find(|c| c.key() == key).unwrap();
                 prop_assert_eq!(hit.barycentrics, c.barycentrics);
                 prop_assert_eq!(hit.front_face, c.front_face);
@@ -73,8 +108,14 @@ fn check_closest(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk:
                 // A box hit: the oracle's closest, or a near-miss box the implementation may
                 // report (boxes may be enlarged), never farther than the oracle's closest.
                 let near = oracle.candidates(ray, AABB_EPS);
-                prop_assert!(near.iter().any(|c| c.key() == key), "preset {preset:?}: box hit {hit:?} is not even a near candidate for {ray:?}");
-                prop_assert!(hit.t as f64 <= t * (1.0 + AABB_EPS) + AABB_EPS, "preset {preset:?}: box hit {hit:?} is farther than the oracle's closest t {t}");
+                prop_assert!(
+                    near.iter().any(|c| c.key() == key),
+                    "preset {preset:?}: box hit {hit:?} is not even a near candidate for {ray:?}"
+                );
+                prop_assert!(
+                    hit.t as f64 <= t * (1.0 + AABB_EPS) + AABB_EPS,
+                    "preset {preset:?}: box hit {hit:?} is farther than the oracle's closest t {t}"
+                );
             }
         }
     }
@@ -83,21 +124,50 @@ fn check_closest(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk:
 
 /// An any-hit that rejects everything and an intersection that reports only opaque boxes:
 /// the committed hit is the closest opaque candidate, so opacity resolution is observed.
-fn check_opaque_only(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk::BuildAccelerationStructureFlagsKHR) -> Result<(), TestCaseError> {
-    let hit = scene.trace_with(ray, |_| false, |q| q.candidate().opaque.then_some(q.candidate().t)).map_err(|e| TestCaseError::fail(format!("{e}")))?;
-    let cands: Vec<_> = oracle.candidates(ray, 0.0).into_iter().filter(|c| c.opaque).collect();
-    let near: Vec<_> = oracle.candidates(ray, AABB_EPS).into_iter().filter(|c| c.opaque).collect();
+fn check_opaque_only(
+    scene: &hostas::Scene,
+    oracle: &Oracle,
+    ray: &Ray,
+    preset: &vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<(), TestCaseError> {
+    let hit = scene
+        .trace_with(
+            ray,
+            |_| false,
+            |q| q.candidate().opaque.then_some(q.candidate().t),
+        )
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let cands: Vec<_> = oracle
+        .candidates(ray, 0.0)
+        .into_iter()
+        .filter(|c| c.opaque)
+        .collect();
+    let near: Vec<_> = oracle
+        .candidates(ray, AABB_EPS)
+        .into_iter()
+        .filter(|c| c.opaque)
+        .collect();
     let best = cands.iter().map(|c| c.t).fold(f64::INFINITY, f64::min);
     match hit.kind {
-        HitKind::Miss => prop_assert!(best == f64::INFINITY, "preset {preset:?}: missed the opaque candidate at {best} for {ray:?}"),
+        HitKind::Miss => prop_assert!(
+            best == f64::INFINITY,
+            "preset {preset:?}: missed the opaque candidate at {best} for {ray:?}"
+        ),
         HitKind::Triangle => {
             prop_assert_eq!(hit.t as f64, best);
             let key = (hit.instance_id, hit.geometry_index, hit.primitive_index);
-            prop_assert!(cands.iter().any(|c| c.key() == key && c.t == best && c.kind == CandidateKind::Triangle));
+            prop_assert!(
+                cands
+                    .iter()
+                    .any(|c| c.key() == key && c.t == best && c.kind == CandidateKind::Triangle)
+            );
         }
         HitKind::Generated => {
             let key = (hit.instance_id, hit.geometry_index, hit.primitive_index);
-            prop_assert!(near.iter().any(|c| c.key() == key), "preset {preset:?}: {hit:?} is not an opaque box candidate");
+            prop_assert!(
+                near.iter().any(|c| c.key() == key),
+                "preset {preset:?}: {hit:?} is not an opaque box candidate"
+            );
             prop_assert!(hit.t as f64 <= best * (1.0 + AABB_EPS) + AABB_EPS);
         }
     }
@@ -105,14 +175,27 @@ fn check_opaque_only(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: 
 }
 
 /// `TerminateOnFirstHit`: whatever is committed must be one of the oracle's candidates.
-fn check_first_hit(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk::BuildAccelerationStructureFlagsKHR) -> Result<(), TestCaseError> {
-    let hit = scene.trace_any(ray).map_err(|e| TestCaseError::fail(format!("{e}")))?;
+fn check_first_hit(
+    scene: &hostas::Scene,
+    oracle: &Oracle,
+    ray: &Ray,
+    preset: &vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<(), TestCaseError> {
+    let hit = scene
+        .trace_any(ray)
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let cands = oracle.candidates(ray, 0.0);
     let near = oracle.candidates(ray, AABB_EPS);
     let key = (hit.instance_id, hit.geometry_index, hit.primitive_index);
     match hit.kind {
-        HitKind::Miss => prop_assert!(cands.is_empty(), "preset {preset:?}: any-hit missed {} candidates", cands.len()),
-        HitKind::Triangle => prop_assert!(cands.iter().any(|c| c.key() == key && c.t == hit.t as f64)),
+        HitKind::Miss => prop_assert!(
+            cands.is_empty(),
+            "preset {preset:?}: any-hit missed {} candidates",
+            cands.len()
+        ),
+        HitKind::Triangle => {
+            prop_assert!(cands.iter().any(|c| c.key() == key && c.t == hit.t as f64))
+        }
         HitKind::Generated => prop_assert!(near.iter().any(|c| c.key() == key)),
     }
     Ok(())
@@ -120,11 +203,21 @@ fn check_first_hit(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &v
 
 /// With every candidate made non-opaque and none confirmed, `proceed` must return exactly the
 /// oracle's candidates (order aside).
-fn check_candidates(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &vk::BuildAccelerationStructureFlagsKHR) -> Result<(), TestCaseError> {
+fn check_candidates(
+    scene: &hostas::Scene,
+    oracle: &Oracle,
+    ray: &Ray,
+    preset: &vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<(), TestCaseError> {
     let mut ray = *ray;
-    let opacity = RayFlags::OPAQUE.0 | RayFlags::NO_OPAQUE.0 | RayFlags::CULL_OPAQUE.0 | RayFlags::CULL_NO_OPAQUE.0;
+    let opacity = RayFlags::OPAQUE.0
+        | RayFlags::NO_OPAQUE.0
+        | RayFlags::CULL_OPAQUE.0
+        | RayFlags::CULL_NO_OPAQUE.0;
     ray.flags = RayFlags((ray.flags.0 & !opacity) | RayFlags::NO_OPAQUE.0);
-    let mut q = scene.ray_query(&ray).map_err(|e| TestCaseError::fail(format!("{e}")))?;
+    let mut q = scene
+        .ray_query(&ray)
+        .map_err(|e| TestCaseError::fail(format!("{e}")))?;
     let mut got = Vec::new();
     while q.proceed() {
         got.push(*q.candidate());
@@ -133,9 +226,23 @@ fn check_candidates(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &
     let exact = oracle.candidates(&ray, 0.0);
     let near = oracle.candidates(&ray, AABB_EPS);
     for c in &exact {
-        let found = got.iter().filter(|g| (g.instance_id, g.geometry_index, g.primitive_index) == c.key()).count();
-        prop_assert_eq!(found, 1, "preset {:?}: oracle candidate {:?} reported {} times for {:?}", preset, c, found, ray);
-        let g = got.iter().find(|g| (g.instance_id, g.geometry_index, g.primitive_index) == c.key()).unwrap();
+        let found = got
+            .iter()
+            .filter(|g| (g.instance_id, g.geometry_index, g.primitive_index) == c.key())
+            .count();
+        prop_assert_eq!(
+            found,
+            1,
+            "preset {:?}: oracle candidate {:?} reported {} times for {:?}",
+            preset,
+            c,
+            found,
+            ray
+        );
+        let g = got
+            .iter()
+            .find(|g| (g.instance_id, g.geometry_index, g.primitive_index) == c.key())
+            .unwrap();
         if c.kind == CandidateKind::Triangle {
             prop_assert_eq!(g.candidate_type(), Some(hostas::CandidateType::Triangle));
             prop_assert_eq!(g.t as f64, c.t);
@@ -152,8 +259,12 @@ fn check_candidates(scene: &hostas::Scene, oracle: &Oracle, ray: &Ray, preset: &
     for g in &got {
         let key = (g.instance_id, g.geometry_index, g.primitive_index);
         let ok = exact.iter().any(|c| c.key() == key)
-            || (g.candidate_type() == Some(hostas::CandidateType::Aabb) && near.iter().any(|c| c.key() == key));
-        prop_assert!(ok, "preset {preset:?}: hostas candidate {g:?} is not an oracle candidate for {ray:?}");
+            || (g.candidate_type() == Some(hostas::CandidateType::Aabb)
+                && near.iter().any(|c| c.key() == key));
+        prop_assert!(
+            ok,
+            "preset {preset:?}: hostas candidate {g:?} is not an oracle candidate for {ray:?}"
+        );
     }
     Ok(())
 }
@@ -169,7 +280,13 @@ fn oracle_instance(_o: &Oracle, id: u32) -> (u32, u32) {
 fn run(seed: u64, prims: usize, adversarial: bool, rays: usize) -> Result<(), TestCaseError> {
     let mut r = generate::rng(seed);
     let desc = generate::random_scene(&mut r, prims, adversarial);
-    CURRENT.with(|c| *c.borrow_mut() = desc.instances.iter().map(|i| (i.custom_index, i.sbt_record_offset)).collect());
+    CURRENT.with(|c| {
+        *c.borrow_mut() = desc
+            .instances
+            .iter()
+            .map(|i| (i.custom_index, i.sbt_record_offset))
+            .collect()
+    });
     check_scene(seed, &desc, rays, &mut r)
 }
 
@@ -202,7 +319,14 @@ fn coincident_primitives() {
     let tri = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
     let positions: Vec<[f32; 3]> = (0..3000).flat_map(|_| tri).collect();
     let desc = SceneDesc {
-        blases: vec![hostas_testkit::BlasDesc { geometries: vec![hostas_testkit::GeometryDesc::Triangles { positions, indices: vec![], transform: None, flags: vk::GeometryFlagsKHR::empty() }] }],
+        blases: vec![hostas_testkit::BlasDesc {
+            geometries: vec![hostas_testkit::GeometryDesc::Triangles {
+                positions,
+                indices: vec![],
+                transform: None,
+                flags: vk::GeometryFlagsKHR::empty(),
+            }],
+        }],
         instances: vec![hostas_testkit::InstanceDesc::identity(0)],
     };
     CURRENT.with(|c| *c.borrow_mut() = vec![(0, 0)]);
@@ -213,7 +337,10 @@ fn coincident_primitives() {
         let scene = device.scene(built.tlas).unwrap();
         let oracle = Oracle::new(&desc);
         for _ in 0..20 {
-            let ray = Ray::new([r.gen_range(0.0..0.5), r.gen_range(0.0..0.5), 1.0], [0.0, 0.0, -1.0]);
+            let ray = Ray::new(
+                [r.gen_range(0.0..0.5), r.gen_range(0.0..0.5), 1.0],
+                [0.0, 0.0, -1.0],
+            );
             check_candidates(&scene, &oracle, &ray, &preset).unwrap();
         }
     }
@@ -225,10 +352,27 @@ fn coincident_primitives() {
 fn large_blas_matches_oracle() {
     let mut r = generate::rng(99);
     let desc = SceneDesc {
-        blases: vec![hostas_testkit::BlasDesc { geometries: vec![generate::random_triangles(&mut r, 100_000, true), generate::random_triangles(&mut r, 10_000, false)] }],
-        instances: vec![hostas_testkit::InstanceDesc::identity(0), hostas_testkit::InstanceDesc { transform: generate::random_transform(&mut r, true), ..hostas_testkit::InstanceDesc::identity(0) }],
+        blases: vec![hostas_testkit::BlasDesc {
+            geometries: vec![
+                generate::random_triangles(&mut r, 100_000, true),
+                generate::random_triangles(&mut r, 10_000, false),
+            ],
+        }],
+        instances: vec![
+            hostas_testkit::InstanceDesc::identity(0),
+            hostas_testkit::InstanceDesc {
+                transform: generate::random_transform(&mut r, true),
+                ..hostas_testkit::InstanceDesc::identity(0)
+            },
+        ],
     };
-    CURRENT.with(|c| *c.borrow_mut() = desc.instances.iter().map(|i| (i.custom_index, i.sbt_record_offset)).collect());
+    CURRENT.with(|c| {
+        *c.borrow_mut() = desc
+            .instances
+            .iter()
+            .map(|i| (i.custom_index, i.sbt_record_offset))
+            .collect()
+    });
     let device = Device::new();
     let oracle = Oracle::new(&desc);
     for preset in PRESETS {

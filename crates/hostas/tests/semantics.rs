@@ -29,7 +29,12 @@ fn cell_triangle(front: bool) -> GeometryDesc {
     } else {
         vec![[1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
     };
-    GeometryDesc::Triangles { positions, indices: vec![], transform: None, flags: vk::GeometryFlagsKHR::empty() }
+    GeometryDesc::Triangles {
+        positions,
+        indices: vec![],
+        transform: None,
+        flags: vk::GeometryFlagsKHR::empty(),
+    }
 }
 
 /// What the CTS shader writes: 2 for a committed triangle or an opaque AABB candidate, 1 for
@@ -40,7 +45,9 @@ fn cts_value(scene: &hostas::Scene, ray: &Ray) -> u32 {
     while q.proceed() {
         match q.candidate_type() {
             Some(hostas::CandidateType::Triangle) => value = value.max(1),
-            Some(hostas::CandidateType::Aabb) => value = value.max(if q.candidate().opaque { 2 } else { 1 }),
+            Some(hostas::CandidateType::Aabb) => {
+                value = value.max(if q.candidate().opaque { 2 } else { 1 })
+            }
             None => {}
         }
     }
@@ -55,12 +62,35 @@ fn ray_flag_table_triangles() {
     // Left column FORCE_OPAQUE, right column FORCE_NO_OPAQUE; top row front-facing, bottom row
     // back-facing (vktRayQueryCullRayFlagsTests.cpp getHitResult).
     let desc = SceneDesc {
-        blases: vec![BlasDesc { geometries: vec![cell_triangle(true)] }, BlasDesc { geometries: vec![cell_triangle(false)] }],
+        blases: vec![
+            BlasDesc {
+                geometries: vec![cell_triangle(true)],
+            },
+            BlasDesc {
+                geometries: vec![cell_triangle(false)],
+            },
+        ],
         instances: vec![
-            InstanceDesc { transform: translate(0.0, 1.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE, ..InstanceDesc::identity(0) },
-            InstanceDesc { transform: translate(1.0, 1.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE, ..InstanceDesc::identity(0) },
-            InstanceDesc { transform: translate(0.0, 0.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE, ..InstanceDesc::identity(1) },
-            InstanceDesc { transform: translate(1.0, 0.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE, ..InstanceDesc::identity(1) },
+            InstanceDesc {
+                transform: translate(0.0, 1.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE,
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                transform: translate(1.0, 1.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE,
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                transform: translate(0.0, 0.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE,
+                ..InstanceDesc::identity(1)
+            },
+            InstanceDesc {
+                transform: translate(1.0, 0.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE,
+                ..InstanceDesc::identity(1)
+            },
         ],
     };
     let table: [(RayFlags, [u32; 4]); 9] = [
@@ -82,8 +112,15 @@ fn ray_flag_table_triangles() {
             // Cells: (0,1) top-left, (1,1) top-right, (0,0) bottom-left, (1,0) bottom-right.
             let cells = [(0.0, 1.0), (1.0, 1.0), (0.0, 0.0), (1.0, 0.0)];
             for (cell, want) in cells.iter().zip(expected) {
-                let ray = Ray { flags, ..Ray::new([cell.0 + 0.25, cell.1 + 0.75, 1.0], [0.0, 0.0, -1.0]) };
-                assert_eq!(cts_value(&scene, &ray), want, "flags {flags:?} cell {cell:?} preset {preset:?}");
+                let ray = Ray {
+                    flags,
+                    ..Ray::new([cell.0 + 0.25, cell.1 + 0.75, 1.0], [0.0, 0.0, -1.0])
+                };
+                assert_eq!(
+                    cts_value(&scene, &ray),
+                    want,
+                    "flags {flags:?} cell {cell:?} preset {preset:?}"
+                );
             }
         }
     }
@@ -91,12 +128,24 @@ fn ray_flag_table_triangles() {
 
 #[test]
 fn ray_flag_table_aabbs() {
-    let boxes = GeometryDesc::Aabbs { boxes: vec![[0.0, 0.0, -0.1, 1.0, 1.0, 0.1]], flags: vk::GeometryFlagsKHR::empty() };
+    let boxes = GeometryDesc::Aabbs {
+        boxes: vec![[0.0, 0.0, -0.1, 1.0, 1.0, 0.1]],
+        flags: vk::GeometryFlagsKHR::empty(),
+    };
     let desc = SceneDesc {
-        blases: vec![BlasDesc { geometries: vec![boxes] }],
+        blases: vec![BlasDesc {
+            geometries: vec![boxes],
+        }],
         instances: vec![
-            InstanceDesc { flags: vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE, ..InstanceDesc::identity(0) },
-            InstanceDesc { transform: translate(1.0, 0.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE, ..InstanceDesc::identity(0) },
+            InstanceDesc {
+                flags: vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE,
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                transform: translate(1.0, 0.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE,
+                ..InstanceDesc::identity(0)
+            },
         ],
     };
     let table: [(RayFlags, [u32; 2]); 8] = [
@@ -114,7 +163,10 @@ fn ray_flag_table_aabbs() {
     let scene = device.scene(built.tlas).unwrap();
     for (flags, expected) in table {
         for (x, want) in [0.5f32, 1.5].iter().zip(expected) {
-            let ray = Ray { flags, ..Ray::new([*x, 0.5, 1.0], [0.0, 0.0, -1.0]) };
+            let ray = Ray {
+                flags,
+                ..Ray::new([*x, 0.5, 1.0], [0.0, 0.0, -1.0])
+            };
             assert_eq!(cts_value(&scene, &ray), want, "flags {flags:?} x {x}");
         }
     }
@@ -136,13 +188,21 @@ fn count_candidates(scene: &hostas::Scene, ray: &Ray) -> usize {
 fn watertight_grid_no_miss_no_double_hit() {
     let mut r = generate::rng(11);
     let device = Device::new();
-    for (case, transform) in [None, Some(generate::random_transform(&mut r, true))].into_iter().enumerate() {
+    for (case, transform) in [None, Some(generate::random_transform(&mut r, true))]
+        .into_iter()
+        .enumerate()
+    {
         let n = 16;
         let desc = SceneDesc {
-            blases: vec![BlasDesc { geometries: vec![generate::grid(n, transform)] }],
+            blases: vec![BlasDesc {
+                geometries: vec![generate::grid(n, transform)],
+            }],
             instances: vec![
                 InstanceDesc::identity(0),
-                InstanceDesc { transform: generate::random_transform(&mut r, true), ..InstanceDesc::identity(0) },
+                InstanceDesc {
+                    transform: generate::random_transform(&mut r, true),
+                    ..InstanceDesc::identity(0)
+                },
             ],
         };
         for preset in PRESETS {
@@ -162,23 +222,49 @@ fn watertight_grid_no_miss_no_double_hit() {
                             let c = r.gen_range(1..n - 1) as f32 + 0.5;
                             (c, c)
                         }
-                        _ => (r.gen_range(0.5..n as f32 - 0.5), r.gen_range(0.5..n as f32 - 0.5)),
+                        _ => (
+                            r.gen_range(0.5..n as f32 - 0.5),
+                            r.gen_range(0.5..n as f32 - 0.5),
+                        ),
                     };
                     let target = world([x, y, 0.0]);
-                    let origin = [target[0] + r.gen_range(-20.0..20.0), target[1] + r.gen_range(-20.0..20.0), target[2] + r.gen_range(-20.0f32..20.0)];
-                    let dir = [target[0] - origin[0], target[1] - origin[1], target[2] - origin[2]];
-                    let ray = Ray { t_max: 10.0, ..Ray::new(origin, dir) };
+                    let origin = [
+                        target[0] + r.gen_range(-20.0..20.0),
+                        target[1] + r.gen_range(-20.0..20.0),
+                        target[2] + r.gen_range(-20.0f32..20.0),
+                    ];
+                    let dir = [
+                        target[0] - origin[0],
+                        target[1] - origin[1],
+                        target[2] - origin[2],
+                    ];
+                    let ray = Ray {
+                        t_max: 10.0,
+                        ..Ray::new(origin, dir)
+                    };
                     // Only this instance: mask everything else out by tracing the two instances separately.
                     let hits = count_candidates(&scene, &ray);
                     // The other instance may also be crossed; count hits on this one only.
-                    let mut q = scene.ray_query(&Ray { flags: RayFlags::NO_OPAQUE, ..ray }).unwrap();
+                    let mut q = scene
+                        .ray_query(&Ray {
+                            flags: RayFlags::NO_OPAQUE,
+                            ..ray
+                        })
+                        .unwrap();
                     let mut mine = 0;
-                    let me = desc.instances.iter().position(|d| std::ptr::eq(d, inst)).unwrap() as u32;
+                    let me = desc
+                        .instances
+                        .iter()
+                        .position(|d| std::ptr::eq(d, inst))
+                        .unwrap() as u32;
                     while q.proceed() {
                         mine += (q.candidate().instance_id == me) as usize;
                     }
                     assert!(hits >= mine);
-                    assert_eq!(mine, 1, "case {case} preset {preset:?}: ray through ({x}, {y}) met the grid {mine} times");
+                    assert_eq!(
+                        mine, 1,
+                        "case {case} preset {preset:?}: ray through ({x}, {y}) met the grid {mine} times"
+                    );
                 }
             }
         }
@@ -190,17 +276,36 @@ fn watertight_fans() {
     let mut r = generate::rng(5);
     let device = Device::new();
     for _ in 0..20 {
-        let center = [r.gen_range(-4.0f32..4.0).round(), r.gen_range(-4.0f32..4.0).round() + 0.5, r.gen_range(-2.0f32..2.0)];
+        let center = [
+            r.gen_range(-4.0f32..4.0).round(),
+            r.gen_range(-4.0f32..4.0).round() + 0.5,
+            r.gen_range(-2.0f32..2.0),
+        ];
         let k = r.gen_range(3..12);
-        let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![generate::fan(center, k, &mut r)] }], instances: vec![InstanceDesc::identity(0)] };
-        let built = desc.build(&device, PRESETS[r.gen_range(0..4)], PRESETS[0]).unwrap();
+        let desc = SceneDesc {
+            blases: vec![BlasDesc {
+                geometries: vec![generate::fan(center, k, &mut r)],
+            }],
+            instances: vec![InstanceDesc::identity(0)],
+        };
+        let built = desc
+            .build(&device, PRESETS[r.gen_range(0..4)], PRESETS[0])
+            .unwrap();
         let scene = device.scene(built.tlas).unwrap();
         for dz in [1.0f32, -1.0] {
             // Straight through the shared vertex (exactly), and slanted through it.
             for d in [[0.0, 0.0, -dz], [0.25, -0.5, -dz], [-0.125, 0.375, -dz]] {
-                let origin = [center[0] - d[0] * 4.0, center[1] - d[1] * 4.0, center[2] - d[2] * 4.0];
+                let origin = [
+                    center[0] - d[0] * 4.0,
+                    center[1] - d[1] * 4.0,
+                    center[2] - d[2] * 4.0,
+                ];
                 let ray = Ray::new(origin, d);
-                assert_eq!(count_candidates(&scene, &ray), 1, "fan of {k} at {center:?}, dir {d:?}");
+                assert_eq!(
+                    count_candidates(&scene, &ray),
+                    1,
+                    "fan of {k} at {center:?}, dir {d:?}"
+                );
             }
         }
     }
@@ -214,13 +319,25 @@ fn checkerboard_cells_hit_once_through_the_diagonal() {
         for x in 0..8 {
             if (x + y) % 2 == 1 {
                 let (x, y) = (x as f32, y as f32);
-                let v = [[x, y + 1.0, 0.0], [x, y, 0.0], [x + 1.0, y + 1.0, 0.0], [x + 1.0, y, 0.0]];
+                let v = [
+                    [x, y + 1.0, 0.0],
+                    [x, y, 0.0],
+                    [x + 1.0, y + 1.0, 0.0],
+                    [x + 1.0, y, 0.0],
+                ];
                 positions.extend_from_slice(&[v[0], v[1], v[2], v[2], v[1], v[3]]);
             }
         }
     }
     let desc = SceneDesc {
-        blases: vec![BlasDesc { geometries: vec![GeometryDesc::Triangles { positions, indices: vec![], transform: None, flags: vk::GeometryFlagsKHR::OPAQUE }] }],
+        blases: vec![BlasDesc {
+            geometries: vec![GeometryDesc::Triangles {
+                positions,
+                indices: vec![],
+                transform: None,
+                flags: vk::GeometryFlagsKHR::OPAQUE,
+            }],
+        }],
         instances: vec![InstanceDesc::identity(0)],
     };
     let device = Device::new();
@@ -229,7 +346,10 @@ fn checkerboard_cells_hit_once_through_the_diagonal() {
         let scene = device.scene(built.tlas).unwrap();
         for y in 0..8 {
             for x in 0..8 {
-                let ray = Ray { t_max: 1.0, ..Ray::new([x as f32 + 0.5, y as f32 + 0.5, 0.5], [0.0, 0.0, -1.0]) };
+                let ray = Ray {
+                    t_max: 1.0,
+                    ..Ray::new([x as f32 + 0.5, y as f32 + 0.5, 0.5], [0.0, 0.0, -1.0])
+                };
                 let expected = ((x + y) % 2 == 1) as usize;
                 assert_eq!(count_candidates(&scene, &ray), expected, "cell ({x}, {y})");
                 assert_eq!(scene.trace_closest(&ray).unwrap().is_hit(), expected == 1);
@@ -242,30 +362,81 @@ fn checkerboard_cells_hit_once_through_the_diagonal() {
 fn ids_count_inactive_instances_and_primitives() {
     // Geometry 1's primitive 0 is inactive (NaN x); instance 1 is inactive (reference 0).
     let tri = |x: f32| [[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]];
-    let g0 = GeometryDesc::Triangles { positions: [tri(0.0), tri(2.0)].concat(), indices: vec![], transform: None, flags: vk::GeometryFlagsKHR::OPAQUE };
+    let g0 = GeometryDesc::Triangles {
+        positions: [tri(0.0), tri(2.0)].concat(),
+        indices: vec![],
+        transform: None,
+        flags: vk::GeometryFlagsKHR::OPAQUE,
+    };
     let mut dead = tri(4.0);
     dead[1][0] = f32::NAN;
-    let g1 = GeometryDesc::Triangles { positions: [dead, tri(6.0), tri(8.0)].concat(), indices: vec![], transform: None, flags: vk::GeometryFlagsKHR::OPAQUE };
+    let g1 = GeometryDesc::Triangles {
+        positions: [dead, tri(6.0), tri(8.0)].concat(),
+        indices: vec![],
+        transform: None,
+        flags: vk::GeometryFlagsKHR::OPAQUE,
+    };
     let desc = SceneDesc {
-        blases: vec![BlasDesc { geometries: vec![g0, g1] }],
+        blases: vec![BlasDesc {
+            geometries: vec![g0, g1],
+        }],
         instances: vec![
-            InstanceDesc { custom_index: 0x807f00, ..InstanceDesc::identity(0) },
-            InstanceDesc { blas: None, ..InstanceDesc::identity(0) },
-            InstanceDesc { transform: translate(0.0, 5.0, 0.0), custom_index: 0xffffff, sbt_record_offset: 0x654321, ..InstanceDesc::identity(0) },
+            InstanceDesc {
+                custom_index: 0x807f00,
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                blas: None,
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                transform: translate(0.0, 5.0, 0.0),
+                custom_index: 0xffffff,
+                sbt_record_offset: 0x654321,
+                ..InstanceDesc::identity(0)
+            },
         ],
     };
     let device = Device::new();
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
-    let hit = |x: f32, y: f32| scene.trace_closest(&Ray::new([x + 0.2, y + 0.2, 1.0], [0.0, 0.0, -1.0])).unwrap();
+    let hit = |x: f32, y: f32| {
+        scene
+            .trace_closest(&Ray::new([x + 0.2, y + 0.2, 1.0], [0.0, 0.0, -1.0]))
+            .unwrap()
+    };
     let h = hit(2.0, 0.0);
-    assert_eq!((h.instance_id, h.instance_custom_index, h.geometry_index, h.primitive_index), (0, 0x807f00, 0, 1));
-    assert!(!hit(4.0, 0.0).is_hit(), "inactive triangle must be invisible");
+    assert_eq!(
+        (
+            h.instance_id,
+            h.instance_custom_index,
+            h.geometry_index,
+            h.primitive_index
+        ),
+        (0, 0x807f00, 0, 1)
+    );
+    assert!(
+        !hit(4.0, 0.0).is_hit(),
+        "inactive triangle must be invisible"
+    );
     let h = hit(6.0, 5.0);
-    assert_eq!((h.instance_id, h.instance_custom_index, h.geometry_index, h.primitive_index), (2, 0xffffff, 1, 1));
+    assert_eq!(
+        (
+            h.instance_id,
+            h.instance_custom_index,
+            h.geometry_index,
+            h.primitive_index
+        ),
+        (2, 0xffffff, 1, 1)
+    );
     let h = hit(8.0, 0.0);
     assert_eq!((h.geometry_index, h.primitive_index), (1, 2));
-    let mut q = scene.ray_query(&Ray { flags: RayFlags::NO_OPAQUE, ..Ray::new([6.2, 5.2, 1.0], [0.0, 0.0, -1.0]) }).unwrap();
+    let mut q = scene
+        .ray_query(&Ray {
+            flags: RayFlags::NO_OPAQUE,
+            ..Ray::new([6.2, 5.2, 1.0], [0.0, 0.0, -1.0])
+        })
+        .unwrap();
     assert!(q.proceed());
     assert_eq!(q.candidate().sbt_record_offset, 0x654321);
 }
@@ -274,50 +445,146 @@ fn ids_count_inactive_instances_and_primitives() {
 fn facing_follows_geometry_mirror_not_instance_mirror() {
     let mirror = Affine::from_rows([-1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
     let front = cell_triangle(true);
-    let GeometryDesc::Triangles { positions, .. } = front.clone() else { unreachable!() };
-    let mirrored_geometry = GeometryDesc::Triangles { positions, indices: vec![], transform: Some(mirror), flags: vk::GeometryFlagsKHR::empty() };
+    let GeometryDesc::Triangles { positions, .. } = front.clone() else {
+        unreachable!()
+    };
+    let mirrored_geometry = GeometryDesc::Triangles {
+        positions,
+        indices: vec![],
+        transform: Some(mirror),
+        flags: vk::GeometryFlagsKHR::empty(),
+    };
     let desc = SceneDesc {
-        blases: vec![BlasDesc { geometries: vec![front] }, BlasDesc { geometries: vec![mirrored_geometry] }],
+        blases: vec![
+            BlasDesc {
+                geometries: vec![front],
+            },
+            BlasDesc {
+                geometries: vec![mirrored_geometry],
+            },
+        ],
         instances: vec![
             InstanceDesc::identity(0),
-            InstanceDesc { transform: Affine { m: [[-1.0, 0.0, 0.0, 4.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]] }, ..InstanceDesc::identity(0) },
-            InstanceDesc { transform: translate(6.0, 0.0, 0.0), ..InstanceDesc::identity(1) },
-            InstanceDesc { transform: translate(8.0, 0.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING, ..InstanceDesc::identity(0) },
-            InstanceDesc { transform: translate(10.0, 0.0, 0.0), flags: vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE, ..InstanceDesc::identity(1) },
+            InstanceDesc {
+                transform: Affine {
+                    m: [
+                        [-1.0, 0.0, 0.0, 4.0],
+                        [0.0, 1.0, 0.0, 0.0],
+                        [0.0, 0.0, 1.0, 0.0],
+                    ],
+                },
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                transform: translate(6.0, 0.0, 0.0),
+                ..InstanceDesc::identity(1)
+            },
+            InstanceDesc {
+                transform: translate(8.0, 0.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING,
+                ..InstanceDesc::identity(0)
+            },
+            InstanceDesc {
+                transform: translate(10.0, 0.0, 0.0),
+                flags: vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE,
+                ..InstanceDesc::identity(1)
+            },
         ],
     };
     let device = Device::new();
     let built = desc.build(&device, PRESETS[2], PRESETS[2]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
-    let probe = |x: f32, flags| scene.trace_closest(&Ray { flags, ..Ray::new([x, 0.75, 1.0], [0.0, 0.0, -1.0]) }).unwrap();
+    let probe = |x: f32, flags| {
+        scene
+            .trace_closest(&Ray {
+                flags,
+                ..Ray::new([x, 0.75, 1.0], [0.0, 0.0, -1.0])
+            })
+            .unwrap()
+    };
     // Identity: front. Instance mirror (x -> 4 - x): still front. Geometry mirror: back.
     assert!(probe(0.25, RayFlags::NONE).front_face);
-    assert!(probe(3.75, RayFlags::NONE).front_face, "an instance transform does not change the winding");
+    assert!(
+        probe(3.75, RayFlags::NONE).front_face,
+        "an instance transform does not change the winding"
+    );
     let h = probe(6.75, RayFlags::NONE);
-    assert!(h.is_hit() && !h.front_face, "a geometry transform with a mirror flips facing");
-    assert!(!probe(8.25, RayFlags::NONE).front_face, "FLIP_FACING reverses facing");
+    assert!(
+        h.is_hit() && !h.front_face,
+        "a geometry transform with a mirror flips facing"
+    );
+    assert!(
+        !probe(8.25, RayFlags::NONE).front_face,
+        "FLIP_FACING reverses facing"
+    );
     assert!(!probe(6.75, RayFlags::CULL_BACK_FACING_TRIANGLES).is_hit());
-    assert!(probe(10.75, RayFlags::CULL_BACK_FACING_TRIANGLES).is_hit(), "FACING_CULL_DISABLE");
+    assert!(
+        probe(10.75, RayFlags::CULL_BACK_FACING_TRIANGLES).is_hit(),
+        "FACING_CULL_DISABLE"
+    );
 }
 
 #[test]
 fn ranges_are_strict_for_triangles_and_inclusive_for_aabbs() {
     let desc = SceneDesc {
         blases: vec![
-            BlasDesc { geometries: vec![cell_triangle(true)] },
-            BlasDesc { geometries: vec![GeometryDesc::Aabbs { boxes: vec![[0.0, 0.0, 0.0, 1.0, 1.0, 0.0]], flags: vk::GeometryFlagsKHR::OPAQUE }] },
+            BlasDesc {
+                geometries: vec![cell_triangle(true)],
+            },
+            BlasDesc {
+                geometries: vec![GeometryDesc::Aabbs {
+                    boxes: vec![[0.0, 0.0, 0.0, 1.0, 1.0, 0.0]],
+                    flags: vk::GeometryFlagsKHR::OPAQUE,
+                }],
+            },
         ],
-        instances: vec![InstanceDesc::identity(0), InstanceDesc { transform: translate(2.0, 0.0, 0.0), ..InstanceDesc::identity(1) }],
+        instances: vec![
+            InstanceDesc::identity(0),
+            InstanceDesc {
+                transform: translate(2.0, 0.0, 0.0),
+                ..InstanceDesc::identity(1)
+            },
+        ],
     };
     let device = Device::new();
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
-    let tri = |t_min: f32, t_max: f32| scene.trace_closest(&Ray { t_min, t_max, ..Ray::new([0.25, 0.75, 1.0], [0.0, 0.0, -1.0]) }).unwrap().kind;
-    assert_eq!(tri(0.0, 1.0), HitKind::Miss, "t == tMax is outside for triangles");
-    assert_eq!(tri(1.0, 2.0), HitKind::Miss, "t == tMin is outside for triangles");
+    let tri = |t_min: f32, t_max: f32| {
+        scene
+            .trace_closest(&Ray {
+                t_min,
+                t_max,
+                ..Ray::new([0.25, 0.75, 1.0], [0.0, 0.0, -1.0])
+            })
+            .unwrap()
+            .kind
+    };
+    assert_eq!(
+        tri(0.0, 1.0),
+        HitKind::Miss,
+        "t == tMax is outside for triangles"
+    );
+    assert_eq!(
+        tri(1.0, 2.0),
+        HitKind::Miss,
+        "t == tMin is outside for triangles"
+    );
     assert_eq!(tri(0.0, 1.0001), HitKind::Triangle);
-    let aabb = |t_min: f32, t_max: f32| count_candidates(&scene, &Ray { t_min, t_max, ..Ray::new([2.5, 0.5, 1.0], [0.0, 0.0, -1.0]) });
-    assert_eq!(aabb(0.0, 1.0), 1, "t == tMax is inside for AABBs (flat box)");
+    let aabb = |t_min: f32, t_max: f32| {
+        count_candidates(
+            &scene,
+            &Ray {
+                t_min,
+                t_max,
+                ..Ray::new([2.5, 0.5, 1.0], [0.0, 0.0, -1.0])
+            },
+        )
+    };
+    assert_eq!(
+        aabb(0.0, 1.0),
+        1,
+        "t == tMax is inside for AABBs (flat box)"
+    );
     assert_eq!(aabb(1.0, 2.0), 1, "t == tMin is inside for AABBs");
     assert_eq!(aabb(0.0, 0.999), 0);
 }
@@ -325,24 +592,56 @@ fn ranges_are_strict_for_triangles_and_inclusive_for_aabbs() {
 #[test]
 fn cull_mask_uses_low_8_bits() {
     let desc = SceneDesc {
-        blases: vec![BlasDesc { geometries: vec![cell_triangle(true)] }],
-        instances: vec![InstanceDesc { mask: 0x0c, ..InstanceDesc::identity(0) }],
+        blases: vec![BlasDesc {
+            geometries: vec![cell_triangle(true)],
+        }],
+        instances: vec![InstanceDesc {
+            mask: 0x0c,
+            ..InstanceDesc::identity(0)
+        }],
     };
     let device = Device::new();
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
-    for (mask, hit) in [(0x04u32, true), (0x08, true), (0x03, false), (0xf00, false), (0x1ff, true)] {
-        let ray = Ray { cull_mask: mask, ..Ray::new([0.25, 0.75, 1.0], [0.0, 0.0, -1.0]) };
-        assert_eq!(scene.trace_closest(&ray).unwrap().is_hit(), hit, "mask {mask:#x}");
+    for (mask, hit) in [
+        (0x04u32, true),
+        (0x08, true),
+        (0x03, false),
+        (0xf00, false),
+        (0x1ff, true),
+    ] {
+        let ray = Ray {
+            cull_mask: mask,
+            ..Ray::new([0.25, 0.75, 1.0], [0.0, 0.0, -1.0])
+        };
+        assert_eq!(
+            scene.trace_closest(&ray).unwrap().is_hit(),
+            hit,
+            "mask {mask:#x}"
+        );
     }
 }
 
 #[test]
 fn query_getters_transforms_object_ray_and_positions() {
     let t = generate::random_transform(&mut generate::rng(3), true);
-    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![cell_triangle(true)] }], instances: vec![InstanceDesc { transform: t, ..InstanceDesc::identity(0) }] };
+    let desc = SceneDesc {
+        blases: vec![BlasDesc {
+            geometries: vec![cell_triangle(true)],
+        }],
+        instances: vec![InstanceDesc {
+            transform: t,
+            ..InstanceDesc::identity(0)
+        }],
+    };
     let device = Device::new();
-    for (flags, has_positions) in [(vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS, true), (vk::BuildAccelerationStructureFlagsKHR::empty(), false)] {
+    for (flags, has_positions) in [
+        (
+            vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS,
+            true,
+        ),
+        (vk::BuildAccelerationStructureFlagsKHR::empty(), false),
+    ] {
         let built = desc.build(&device, flags, PRESETS[0]).unwrap();
         let scene = device.scene(built.tlas).unwrap();
         let origin = t.point([0.25, 0.75, 1.0]);
@@ -352,12 +651,18 @@ fn query_getters_transforms_object_ray_and_positions() {
             q.confirm_intersection().unwrap();
         }
         assert_eq!(q.committed_type(), hostas::CommittedType::Triangle);
-        assert!((q.committed().t - 0.5).abs() < 1e-4, "t is measured along the unnormalized direction");
+        assert!(
+            (q.committed().t - 0.5).abs() < 1e-4,
+            "t is measured along the unnormalized direction"
+        );
         assert_eq!(q.object_to_world(true).unwrap(), t);
         let o = q.object_ray_origin(true).unwrap();
         let d = q.object_ray_direction(true).unwrap();
         for k in 0..3 {
-            assert!((o[k] - [0.25, 0.75, 1.0][k]).abs() < 1e-3 && (d[k] - [0.0, 0.0, -2.0][k]).abs() < 1e-3);
+            assert!(
+                (o[k] - [0.25, 0.75, 1.0][k]).abs() < 1e-3
+                    && (d[k] - [0.0, 0.0, -2.0][k]).abs() < 1e-3
+            );
         }
         let w2o = q.world_to_object(true).unwrap();
         assert!((w2o.point(origin)[0] - 0.25).abs() < 1e-3);
@@ -368,7 +673,12 @@ fn query_getters_transforms_object_ray_and_positions() {
             }
             Err(e) => {
                 assert!(!has_positions);
-                assert_eq!(e.vuid_str(), Some("VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR-08761"));
+                assert_eq!(
+                    e.vuid_str(),
+                    Some(
+                        "VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR-08761"
+                    )
+                );
             }
         }
     }
@@ -376,8 +686,19 @@ fn query_getters_transforms_object_ray_and_positions() {
 
 #[test]
 fn generate_and_terminate_flow() {
-    let boxes = GeometryDesc::Aabbs { boxes: vec![[0.0, 0.0, -1.0, 1.0, 1.0, -0.5], [0.0, 0.0, -3.0, 1.0, 1.0, -2.5]], flags: vk::GeometryFlagsKHR::empty() };
-    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![boxes] }], instances: vec![InstanceDesc::identity(0)] };
+    let boxes = GeometryDesc::Aabbs {
+        boxes: vec![
+            [0.0, 0.0, -1.0, 1.0, 1.0, -0.5],
+            [0.0, 0.0, -3.0, 1.0, 1.0, -2.5],
+        ],
+        flags: vk::GeometryFlagsKHR::empty(),
+    };
+    let desc = SceneDesc {
+        blases: vec![BlasDesc {
+            geometries: vec![boxes],
+        }],
+        instances: vec![InstanceDesc::identity(0)],
+    };
     let device = Device::new();
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
@@ -386,11 +707,18 @@ fn generate_and_terminate_flow() {
     let mut q = scene.ray_query(&ray).unwrap();
     while q.proceed() {
         assert_eq!(q.candidate_type(), Some(hostas::CandidateType::Aabb));
-        let far = if q.candidate().primitive_index == 0 { 1.0 } else { 3.0 };
+        let far = if q.candidate().primitive_index == 0 {
+            1.0
+        } else {
+            3.0
+        };
         if far <= q.committed().t || q.committed_type() == hostas::CommittedType::None {
             q.generate_intersection(far).unwrap();
         } else {
-            assert!(q.generate_intersection(far).is_err(), "hitT beyond the committed t is rejected");
+            assert!(
+                q.generate_intersection(far).is_err(),
+                "hitT beyond the committed t is rejected"
+            );
         }
     }
     assert_eq!(q.committed_type(), hostas::CommittedType::Generated);
@@ -409,17 +737,32 @@ fn generate_and_terminate_flow() {
 
 #[test]
 fn invalid_rays_are_rejected() {
-    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![cell_triangle(true)] }], instances: vec![InstanceDesc::identity(0)] };
+    let desc = SceneDesc {
+        blases: vec![BlasDesc {
+            geometries: vec![cell_triangle(true)],
+        }],
+        instances: vec![InstanceDesc::identity(0)],
+    };
     let device = Device::new();
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
     let bad = [
-        Ray { t_min: 2.0, t_max: 1.0, ..Ray::new([0.0; 3], [0.0, 0.0, 1.0]) },
+        Ray {
+            t_min: 2.0,
+            t_max: 1.0,
+            ..Ray::new([0.0; 3], [0.0, 0.0, 1.0])
+        },
         Ray::new([f32::NAN, 0.0, 0.0], [0.0, 0.0, 1.0]),
-        Ray { flags: RayFlags::SKIP_TRIANGLES | RayFlags::SKIP_AABBS, ..Ray::new([0.0; 3], [0.0, 0.0, 1.0]) },
+        Ray {
+            flags: RayFlags::SKIP_TRIANGLES | RayFlags::SKIP_AABBS,
+            ..Ray::new([0.0; 3], [0.0, 0.0, 1.0])
+        },
     ];
     for r in bad {
-        assert!(matches!(scene.trace_closest(&r), Err(hostas::Error::Validation { .. })));
+        assert!(matches!(
+            scene.trace_closest(&r),
+            Err(hostas::Error::Validation { .. })
+        ));
     }
 }
 
@@ -430,11 +773,18 @@ fn batch_tracing_matches_single_rays() {
     let device = Device::new();
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
-    let rays: Vec<Ray> = (0..2000).map(|_| generate::random_ray(&mut r, &desc)).collect();
+    let rays: Vec<Ray> = (0..2000)
+        .map(|_| generate::random_ray(&mut r, &desc))
+        .collect();
     for any in [false, true] {
         let batch = scene.trace_batch(&rays, any).unwrap();
         for (ray, hit) in rays.iter().zip(&batch) {
-            let single = if any { scene.trace_any(ray) } else { scene.trace_closest(ray) }.unwrap();
+            let single = if any {
+                scene.trace_any(ray)
+            } else {
+                scene.trace_closest(ray)
+            }
+            .unwrap();
             assert_eq!(*hit, single);
         }
     }
@@ -446,29 +796,58 @@ fn batch_tracing_matches_single_rays() {
 #[test]
 fn axis_aligned_rays_on_box_boundaries() {
     let n = 24;
-    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![generate::grid(n, None)] }], instances: vec![InstanceDesc::identity(0)] };
+    let desc = SceneDesc {
+        blases: vec![BlasDesc {
+            geometries: vec![generate::grid(n, None)],
+        }],
+        instances: vec![InstanceDesc::identity(0)],
+    };
     let device = Device::new();
     for preset in PRESETS {
         let built = desc.build(&device, preset, preset).unwrap();
         let scene = device.scene(built.tlas).unwrap();
         for y in 1..n {
             for x in 1..n {
-                for (dir, z) in [([0.0f32, 0.0, -1.0], 3.0f32), ([0.0, 0.0, 1.0], -3.0), ([-0.0, 0.0, -1.0], 3.0)] {
+                for (dir, z) in [
+                    ([0.0f32, 0.0, -1.0], 3.0f32),
+                    ([0.0, 0.0, 1.0], -3.0),
+                    ([-0.0, 0.0, -1.0], 3.0),
+                ] {
                     let ray = Ray::new([x as f32, y as f32, z], dir);
-                    assert_eq!(count_candidates(&scene, &ray), 1, "vertex ({x}, {y}) dir {dir:?} preset {preset:?}");
+                    assert_eq!(
+                        count_candidates(&scene, &ray),
+                        1,
+                        "vertex ({x}, {y}) dir {dir:?} preset {preset:?}"
+                    );
                     assert!(scene.trace_closest(&ray).unwrap().is_hit());
                     let ray = Ray::new([x as f32 + 0.5, y as f32, z], dir);
-                    assert_eq!(count_candidates(&scene, &ray), 1, "edge ({x}.5, {y}) dir {dir:?} preset {preset:?}");
+                    assert_eq!(
+                        count_candidates(&scene, &ray),
+                        1,
+                        "edge ({x}.5, {y}) dir {dir:?} preset {preset:?}"
+                    );
                 }
             }
         }
     }
     // A flat box hit exactly along its plane and at its boundary.
-    let boxes = GeometryDesc::Aabbs { boxes: vec![[0.0, 0.0, 0.0, 1.0, 1.0, 0.0]], flags: vk::GeometryFlagsKHR::OPAQUE };
-    let desc = SceneDesc { blases: vec![BlasDesc { geometries: vec![boxes] }], instances: vec![InstanceDesc::identity(0)] };
+    let boxes = GeometryDesc::Aabbs {
+        boxes: vec![[0.0, 0.0, 0.0, 1.0, 1.0, 0.0]],
+        flags: vk::GeometryFlagsKHR::OPAQUE,
+    };
+    let desc = SceneDesc {
+        blases: vec![BlasDesc {
+            geometries: vec![boxes],
+        }],
+        instances: vec![InstanceDesc::identity(0)],
+    };
     let built = desc.build(&device, PRESETS[0], PRESETS[0]).unwrap();
     let scene = device.scene(built.tlas).unwrap();
-    for ray in [Ray::new([-1.0, 0.5, 0.0], [1.0, 0.0, 0.0]), Ray::new([1.0, 1.0, 2.0], [0.0, 0.0, -1.0]), Ray::new([0.0, -1.0, 0.0], [0.0, 1.0, 0.0])] {
+    for ray in [
+        Ray::new([-1.0, 0.5, 0.0], [1.0, 0.0, 0.0]),
+        Ray::new([1.0, 1.0, 2.0], [0.0, 0.0, -1.0]),
+        Ray::new([0.0, -1.0, 0.0], [0.0, 1.0, 0.0]),
+    ] {
         assert!(scene.trace_closest(&ray).unwrap().is_hit(), "{ray:?}");
     }
 }

@@ -9,8 +9,9 @@
 //! tests, then implemented).
 
 use hostas::{
-    AabbsData, AccelerationStructure, AccelerationStructureCreateInfo, Affine, BuildGeometryInfo, BuildRangeInfo, Buffer,
-    CandidateType, Device, Error, Geometry, Instance, InstancesData, Location, Ray, RayFlags, TrianglesData, vk,
+    AabbsData, AccelerationStructure, AccelerationStructureCreateInfo, Affine, Buffer,
+    BuildGeometryInfo, BuildRangeInfo, CandidateType, Device, Error, Geometry, Instance,
+    InstancesData, Location, Ray, RayFlags, TrianglesData, vk,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -52,7 +53,10 @@ fn prim(i: usize, g: usize, p: u32) -> At {
     At::Loc(Location::info(i).geometry(g).primitive(p))
 }
 fn sizes_geom(g: usize) -> At {
-    At::Loc(Location { geometry: Some(g as u32), ..Location::NONE })
+    At::Loc(Location {
+        geometry: Some(g as u32),
+        ..Location::NONE
+    })
 }
 
 fn expect(name: &str, result: Result<(), Error>, want: Want, at: At) {
@@ -62,11 +66,21 @@ fn expect(name: &str, result: Result<(), Error>, want: Want, at: At) {
     };
     match want {
         Want::Vuid(v) => {
-            assert!(matches!(err, Error::Validation { .. }), "{name}: not a validation error: {err:?}");
+            assert!(
+                matches!(err, Error::Validation { .. }),
+                "{name}: not a validation error: {err:?}"
+            );
             assert_eq!(err.vuid_str(), Some(v), "{name}: {err}");
-            assert_eq!(err.vk_result(), vk::Result::ERROR_VALIDATION_FAILED_EXT, "{name}");
+            assert_eq!(
+                err.vk_result(),
+                vk::Result::ERROR_VALIDATION_FAILED_EXT,
+                "{name}"
+            );
         }
-        Want::RangeTooShort => assert!(matches!(err, Error::RangeTooShort { .. }), "{name}: {err:?}"),
+        Want::RangeTooShort => assert!(
+            matches!(err, Error::RangeTooShort { .. }),
+            "{name}: {err:?}"
+        ),
         Want::NotSupported => assert!(matches!(err, Error::NotSupported(_)), "{name}: {err:?}"),
     }
     match at {
@@ -85,7 +99,11 @@ fn same(results: Vec<Result<(), Error>>) -> Result<(), Error> {
     for r in it {
         match &r {
             Ok(()) => return r,
-            Err(e) if e.vuid_str() != e0.vuid_str() || e.location() != e0.location() || std::mem::discriminant(e) != std::mem::discriminant(e0) => {
+            Err(e)
+                if e.vuid_str() != e0.vuid_str()
+                    || e.location() != e0.location()
+                    || std::mem::discriminant(e) != std::mem::discriminant(e0) =>
+            {
                 return r;
             }
             Err(_) => {}
@@ -107,18 +125,38 @@ fn fast() -> vk::BuildAccelerationStructureFlagsKHR {
     vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
 }
 fn updatable() -> vk::BuildAccelerationStructureFlagsKHR {
-    vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+    vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE
+        | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
 }
 
 /// Two triangles, non-indexed.
-static TRI_POS: [[f32; 3]; 6] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [2.0, 0.0, 0.0], [3.0, 0.0, 0.0], [2.0, 1.0, 0.0]];
+static TRI_POS: [[f32; 3]; 6] = [
+    [0.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [2.0, 0.0, 0.0],
+    [3.0, 0.0, 0.0],
+    [2.0, 1.0, 0.0],
+];
 /// The same with triangle 1 inactive (NaN X in its first vertex).
-static TRI_POS_INACTIVE_1: [[f32; 3]; 6] =
-    [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [f32::NAN, 0.0, 0.0], [3.0, 0.0, 0.0], [2.0, 1.0, 0.0]];
+static TRI_POS_INACTIVE_1: [[f32; 3]; 6] = [
+    [0.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [f32::NAN, 0.0, 0.0],
+    [3.0, 0.0, 0.0],
+    [2.0, 1.0, 0.0],
+];
 static IDX32: [u32; 6] = [0, 1, 2, 3, 4, 5];
 static IDENTITY_ROWS: [f32; 12] = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
-static BOXES: [[f32; 6]; 2] = [[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], [2.0, 2.0, 2.0, 3.0, 3.0, 3.0]];
-static BOXES_INACTIVE_1: [[f32; 6]; 2] = [[0.0, 0.0, 0.0, 1.0, 1.0, 1.0], [f32::NAN, 2.0, 2.0, 3.0, 3.0, 3.0]];
+static BOXES: [[f32; 6]; 2] = [
+    [0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+    [2.0, 2.0, 2.0, 3.0, 3.0, 3.0],
+];
+static BOXES_INACTIVE_1: [[f32; 6]; 2] = [
+    [0.0, 0.0, 0.0, 1.0, 1.0, 1.0],
+    [f32::NAN, 2.0, 2.0, 3.0, 3.0, 3.0],
+];
 
 fn bytes_of<T: bytemuck::Pod>(v: &'static [T]) -> &'static [u8] {
     bytemuck::cast_slice(v)
@@ -136,7 +174,11 @@ fn tri_data() -> TrianglesData<'static> {
     }
 }
 fn indexed_data() -> TrianglesData<'static> {
-    TrianglesData { index_type: vk::IndexType::UINT32, index_data: Some(bytes_of(&IDX32)), ..tri_data() }
+    TrianglesData {
+        index_type: vk::IndexType::UINT32,
+        index_data: Some(bytes_of(&IDX32)),
+        ..tri_data()
+    }
 }
 fn tris(d: TrianglesData<'_>) -> Geometry<'_> {
     Geometry::triangles(d, vk::GeometryFlagsKHR::OPAQUE)
@@ -145,21 +187,37 @@ fn tri_geom() -> Geometry<'static> {
     tris(tri_data())
 }
 fn aabb_data() -> AabbsData<'static> {
-    AabbsData { data: bytes_of(&BOXES), stride: 24 }
+    AabbsData {
+        data: bytes_of(&BOXES),
+        stride: 24,
+    }
 }
 fn aabb_geom() -> Geometry<'static> {
     Geometry::aabbs(aabb_data(), vk::GeometryFlagsKHR::empty())
 }
 fn r(n: u32) -> BuildRangeInfo {
-    BuildRangeInfo { primitive_count: n, ..Default::default() }
+    BuildRangeInfo {
+        primitive_count: n,
+        ..Default::default()
+    }
 }
 
-fn create(device: &Device, ty: vk::AccelerationStructureTypeKHR, size: u64) -> AccelerationStructure {
-    device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, size)).expect("create")
+fn create(
+    device: &Device,
+    ty: vk::AccelerationStructureTypeKHR,
+    size: u64,
+) -> AccelerationStructure {
+    device
+        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, size))
+        .expect("create")
 }
 
 /// Runs `bad` as info 1 between two valid bottom-level builds.
-fn with_neighbours(device: &Device, bad: BuildGeometryInfo, bad_ranges: &[BuildRangeInfo]) -> Result<(), Error> {
+fn with_neighbours(
+    device: &Device,
+    bad: BuildGeometryInfo,
+    bad_ranges: &[BuildRangeInfo],
+) -> Result<(), Error> {
     let g = [tri_geom()];
     let ranges = [r(2)];
     let (d0, d2) = (create(device, BLAS, BIG), create(device, BLAS, BIG));
@@ -182,7 +240,11 @@ fn build_bad_on(
 ) -> Result<(), Error> {
     let dst = create(device, GENERIC, BIG);
     let mut scratch = vec![0u8; BIG as usize];
-    with_neighbours(device, BuildGeometryInfo::build(ty, flags, geometries, dst, &mut scratch), ranges)
+    with_neighbours(
+        device,
+        BuildGeometryInfo::build(ty, flags, geometries, dst, &mut scratch),
+        ranges,
+    )
 }
 
 fn build_bad(
@@ -205,8 +267,18 @@ fn sizes(
     geometries: &[Geometry],
     counts: &[u32],
 ) -> Result<(), Error> {
-    let probe = BuildGeometryInfo { ty, flags, mode: vk::BuildAccelerationStructureModeKHR::BUILD, src: None, dst: None, geometries, scratch: None };
-    Device::new().build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, counts).map(|_| ())
+    let probe = BuildGeometryInfo {
+        ty,
+        flags,
+        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
+        src: None,
+        dst: None,
+        geometries,
+        scratch: None,
+    };
+    Device::new()
+        .build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, counts)
+        .map(|_| ())
 }
 
 fn build_into(
@@ -218,7 +290,10 @@ fn build_into(
     ranges: &[BuildRangeInfo],
 ) -> Result<(), Error> {
     let mut s = vec![0u8; BIG as usize];
-    device.build_acceleration_structures(&mut [BuildGeometryInfo::build(ty, flags, geometries, dst, &mut s)], &[ranges])
+    device.build_acceleration_structures(
+        &mut [BuildGeometryInfo::build(ty, flags, geometries, dst, &mut s)],
+        &[ranges],
+    )
 }
 
 /// A structure built from `geometries` into a fresh GENERIC destination.
@@ -242,7 +317,23 @@ fn simple_blas(device: &Device) -> AccelerationStructure {
 fn instances(blas: AccelerationStructure, edit: impl Fn(&mut Instance)) -> Vec<u8> {
     (0..4)
         .flat_map(|i| {
-            let mut inst = hostas::quick::instance(blas, Affine::from_rows([1.0, 0.0, 0.0, 5.0 * i as f32, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]));
+            let mut inst = hostas::quick::instance(
+                blas,
+                Affine::from_rows([
+                    1.0,
+                    0.0,
+                    0.0,
+                    5.0 * i as f32,
+                    0.0,
+                    1.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                    0.0,
+                ]),
+            );
             if i == 1 {
                 inst.acceleration_structure_reference = 0;
             }
@@ -275,17 +366,39 @@ fn update_bad(
     ranges: &[BuildRangeInfo],
     scratch: Option<&mut [u8]>,
 ) -> Result<(), Error> {
-    let info = BuildGeometryInfo { ty, flags, mode: vk::BuildAccelerationStructureModeKHR::UPDATE, src, dst: Some(dst), geometries, scratch };
+    let info = BuildGeometryInfo {
+        ty,
+        flags,
+        mode: vk::BuildAccelerationStructureModeKHR::UPDATE,
+        src,
+        dst: Some(dst),
+        geometries,
+        scratch,
+    };
     with_neighbours(device, info, ranges)
 }
 
 /// Builds an updatable two-geometry BLAS from (`g0`, `g1`) and updates it in place with
 /// (`n0`, `n1`).
-fn update_two(g: [Geometry; 2], gr: [BuildRangeInfo; 2], n: [Geometry; 2], nr: [BuildRangeInfo; 2]) -> Result<(), Error> {
+fn update_two(
+    g: [Geometry; 2],
+    gr: [BuildRangeInfo; 2],
+    n: [Geometry; 2],
+    nr: [BuildRangeInfo; 2],
+) -> Result<(), Error> {
     let device = Device::new();
     let src = built(&device, BLAS, updatable(), &g, &gr);
     let mut s = vec![0u8; BIG as usize];
-    update_bad(&device, Some(src), src, BLAS, updatable(), &n, &nr, Some(&mut s))
+    update_bad(
+        &device,
+        Some(src),
+        src,
+        BLAS,
+        updatable(),
+        &n,
+        &nr,
+        Some(&mut s),
+    )
 }
 
 /// Whether the structure's memory is still all zero (never written).
@@ -326,7 +439,11 @@ fn down(x: f32, y: f32) -> Ray {
 fn ray_invalid(ray: Ray) -> Result<(), Error> {
     let device = Device::new();
     let scene = triangle_scene(&device, fast());
-    same(vec![ray.validate(), scene.ray_query(&ray).map(|_| ()), scene.trace_closest(&ray).map(|_| ())])
+    same(vec![
+        ray.validate(),
+        scene.ray_query(&ray).map(|_| ()),
+        scene.trace_closest(&ray).map(|_| ()),
+    ])
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1428,13 +1545,26 @@ fn overlapping_update() -> Result<(), Error> {
     let device = Device::new();
     let buffer = Buffer::new(2 * BIG).expect("buffer");
     let place = |offset: u64| {
-        let ci = AccelerationStructureCreateInfo { buffer: Some(buffer.clone()), offset, ..AccelerationStructureCreateInfo::new(BLAS, BIG) };
+        let ci = AccelerationStructureCreateInfo {
+            buffer: Some(buffer.clone()),
+            offset,
+            ..AccelerationStructureCreateInfo::new(BLAS, BIG)
+        };
         device.create_acceleration_structure(&ci).expect("create")
     };
     let (x, y) = (place(0), place(BIG / 2));
     build_into(&device, x, BLAS, updatable(), &[tri_geom()], &[r(2)]).expect("source");
     let mut s = vec![0u8; BIG as usize];
-    update_bad(&device, Some(x), y, BLAS, updatable(), &[tri_geom()], &[r(2)], Some(&mut s))
+    update_bad(
+        &device,
+        Some(x),
+        y,
+        BLAS,
+        updatable(),
+        &[tri_geom()],
+        &[r(2)],
+        Some(&mut s),
+    )
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1470,8 +1600,14 @@ fn every_library_vuid_has_a_case() {
         "traverse/query.rs",
     ];
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let src: String = FILES.iter().map(|f| std::fs::read_to_string(root.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"))).collect();
-    assert!(src.matches("\"VUID-").count() > 80, "the VUIDs of the build path were not found");
+    let src: String = FILES
+        .iter()
+        .map(|f| std::fs::read_to_string(root.join(f)).unwrap_or_else(|e| panic!("{f}: {e}")))
+        .collect();
+    assert!(
+        src.matches("\"VUID-").count() > 80,
+        "the VUIDs of the build path were not found"
+    );
     let this = include_str!("validation.rs");
     let mut missing = Vec::new();
     for (i, _) in src.match_indices("\"VUID-") {
@@ -1483,7 +1619,10 @@ fn every_library_vuid_has_a_case() {
     }
     missing.sort();
     missing.dedup();
-    assert!(missing.is_empty(), "library VUIDs without a case: {missing:?}");
+    assert!(
+        missing.is_empty(),
+        "library VUIDs without a case: {missing:?}"
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1510,8 +1649,14 @@ fn cross_info_failures_write_nothing() {
             &[&ranges, &ranges, &ranges],
         )
         .unwrap_err();
-    assert_eq!(e.vuid_str(), Some("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03698"));
-    assert!(untouched(&device, a) && untouched(&device, b), "03698: an earlier info was built");
+    assert_eq!(
+        e.vuid_str(),
+        Some("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03698")
+    );
+    assert!(
+        untouched(&device, a) && untouched(&device, b),
+        "03698: an earlier info was built"
+    );
 
     // 03800: the last info's destination is invalid.
     let (a, b) = (create(&device, BLAS, BIG), create(&device, BLAS, BIG));
@@ -1521,18 +1666,34 @@ fn cross_info_failures_write_nothing() {
             &mut [
                 BuildGeometryInfo::build(BLAS, fast(), &g, a, &mut s0),
                 BuildGeometryInfo::build(BLAS, fast(), &g, b, &mut s1),
-                BuildGeometryInfo::build(BLAS, fast(), &g, AccelerationStructure(0xdead_0000), &mut s2),
+                BuildGeometryInfo::build(
+                    BLAS,
+                    fast(),
+                    &g,
+                    AccelerationStructure(0xdead_0000),
+                    &mut s2,
+                ),
             ],
             &[&ranges, &ranges, &ranges],
         )
         .unwrap_err();
-    assert_eq!(e.vuid_str(), Some("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800"));
-    assert!(untouched(&device, a) && untouched(&device, b), "03800: an earlier info was built");
+    assert_eq!(
+        e.vuid_str(),
+        Some("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800")
+    );
+    assert!(
+        untouched(&device, a) && untouched(&device, b),
+        "03800: an earlier info was built"
+    );
 
     // 03702: the last info's destination overlaps the first's memory.
     let buffer = Buffer::new(2 * BIG).expect("buffer");
     let place = |offset: u64| {
-        let ci = AccelerationStructureCreateInfo { buffer: Some(buffer.clone()), offset, ..AccelerationStructureCreateInfo::new(BLAS, BIG) };
+        let ci = AccelerationStructureCreateInfo {
+            buffer: Some(buffer.clone()),
+            offset,
+            ..AccelerationStructureCreateInfo::new(BLAS, BIG)
+        };
         device.create_acceleration_structure(&ci).expect("create")
     };
     let (a, c) = (place(0), place(BIG - 256));
@@ -1548,24 +1709,48 @@ fn cross_info_failures_write_nothing() {
             &[&ranges, &ranges, &ranges],
         )
         .unwrap_err();
-    assert_eq!(e.vuid_str(), Some("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03702"));
-    assert!(untouched(&device, a) && untouched(&device, b) && untouched(&device, c), "03702: an info was built");
+    assert_eq!(
+        e.vuid_str(),
+        Some("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03702")
+    );
+    assert!(
+        untouched(&device, a) && untouched(&device, b) && untouched(&device, c),
+        "03702: an info was built"
+    );
 
     // 03403: info 1 updates x, info 2 rebuilds x; info 0 and x stay as they were.
     let x = built(&device, BLAS, updatable(), &g, &ranges);
     let x_before = bytes_of_structure(&device, x);
     let (a, y) = (create(&device, BLAS, BIG), create(&device, BLAS, BIG));
     let (mut s0, mut s1, mut s2) = (buf(), buf(), buf());
-    let update = BuildGeometryInfo { mode: vk::BuildAccelerationStructureModeKHR::UPDATE, src: Some(x), ..BuildGeometryInfo::build(BLAS, updatable(), &g, y, &mut s1) };
+    let update = BuildGeometryInfo {
+        mode: vk::BuildAccelerationStructureModeKHR::UPDATE,
+        src: Some(x),
+        ..BuildGeometryInfo::build(BLAS, updatable(), &g, y, &mut s1)
+    };
     let e = device
         .build_acceleration_structures(
-            &mut [BuildGeometryInfo::build(BLAS, fast(), &g, a, &mut s0), update, BuildGeometryInfo::build(BLAS, updatable(), &g, x, &mut s2)],
+            &mut [
+                BuildGeometryInfo::build(BLAS, fast(), &g, a, &mut s0),
+                update,
+                BuildGeometryInfo::build(BLAS, updatable(), &g, x, &mut s2),
+            ],
             &[&ranges, &ranges, &ranges],
         )
         .unwrap_err();
-    assert_eq!(e.vuid_str(), Some("VUID-vkBuildAccelerationStructuresKHR-pInfos-03403"));
-    assert!(untouched(&device, a) && untouched(&device, y), "03403: an info was built");
-    assert_eq!(bytes_of_structure(&device, x), x_before, "03403: the source changed");
+    assert_eq!(
+        e.vuid_str(),
+        Some("VUID-vkBuildAccelerationStructuresKHR-pInfos-03403")
+    );
+    assert!(
+        untouched(&device, a) && untouched(&device, y),
+        "03403: an info was built"
+    );
+    assert_eq!(
+        bytes_of_structure(&device, x),
+        x_before,
+        "03403: the source changed"
+    );
 
     // And after each failure the same destinations build fine.
     build_into(&device, a, BLAS, fast(), &g, &ranges).expect("rebuild after failure");
@@ -1583,12 +1768,24 @@ fn cross_info_03407_writes_nothing() {
     let (mut s0, mut s1) = (vec![0u8; BIG as usize], vec![0u8; BIG as usize]);
     let e = device
         .build_acceleration_structures(
-            &mut [BuildGeometryInfo::build(BLAS, fast(), &g, being_built, &mut s0), BuildGeometryInfo::build(TLAS, fast(), &gi, t, &mut s1)],
+            &mut [
+                BuildGeometryInfo::build(BLAS, fast(), &g, being_built, &mut s0),
+                BuildGeometryInfo::build(TLAS, fast(), &gi, t, &mut s1),
+            ],
             &[&[r(2)], &[r(4)]],
         )
         .unwrap_err();
-    assert_eq!(e.vuid_str(), Some("VUID-vkBuildAccelerationStructuresKHR-None-03407"));
-    assert_eq!(e.location(), Some(Location::info(1).geometry(0).primitive(2)));
-    assert!(untouched(&device, being_built), "info 0 was built before the cross-info rule failed");
+    assert_eq!(
+        e.vuid_str(),
+        Some("VUID-vkBuildAccelerationStructuresKHR-None-03407")
+    );
+    assert_eq!(
+        e.location(),
+        Some(Location::info(1).geometry(0).primitive(2))
+    );
+    assert!(
+        untouched(&device, being_built),
+        "info 0 was built before the cross-info rule failed"
+    );
     assert!(untouched(&device, t));
 }

@@ -16,12 +16,26 @@
 use super::common::*;
 use super::source::Source;
 use hostas::input::vertex_format::{Component, SUPPORTED_VERTEX_FORMATS, vertex_format_info};
-use hostas::{AccelerationStructure, AccelerationStructureCreateInfo, Affine, Buffer, BuildGeometryInfo, BuildRangeInfo, Geometry, InstancesData, vk};
+use hostas::{
+    AccelerationStructure, AccelerationStructureCreateInfo, Affine, Buffer, BuildGeometryInfo,
+    BuildRangeInfo, Geometry, InstancesData, vk,
+};
 
 #[derive(Clone, Debug)]
 pub enum GeomData {
-    Triangles { format: vk::Format, vertices: Vec<u8>, stride: u64, max_vertex: u32, index_type: vk::IndexType, indices: Option<Vec<u8>>, transform: Option<Vec<u8>> },
-    Aabbs { data: Vec<u8>, stride: u64 },
+    Triangles {
+        format: vk::Format,
+        vertices: Vec<u8>,
+        stride: u64,
+        max_vertex: u32,
+        index_type: vk::IndexType,
+        indices: Option<Vec<u8>>,
+        transform: Option<Vec<u8>>,
+    },
+    Aabbs {
+        data: Vec<u8>,
+        stride: u64,
+    },
     InstanceArray(Vec<u8>),
     InstancePointers(Vec<Vec<u8>>),
 }
@@ -47,7 +61,9 @@ pub enum Dst {
     FixtureBlas,
     Garbage(u64),
     /// In the same buffer as the previous info's destination, overlapping it or not.
-    SharedBuffer { overlap: bool },
+    SharedBuffer {
+        overlap: bool,
+    },
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -107,7 +123,14 @@ fn flags_from(s: &mut Source) -> vk::BuildAccelerationStructureFlagsKHR {
     }
     let b = s.u8();
     let mut f = F::empty();
-    for (bit, flag) in [(1, F::ALLOW_UPDATE), (2, F::ALLOW_COMPACTION), (4, F::PREFER_FAST_TRACE), (8, F::PREFER_FAST_BUILD), (16, F::LOW_MEMORY), (32, F::ALLOW_DATA_ACCESS)] {
+    for (bit, flag) in [
+        (1, F::ALLOW_UPDATE),
+        (2, F::ALLOW_COMPACTION),
+        (4, F::PREFER_FAST_TRACE),
+        (8, F::PREFER_FAST_BUILD),
+        (16, F::LOW_MEMORY),
+        (32, F::ALLOW_DATA_ACCESS),
+    ] {
         if b & bit != 0 {
             f |= flag;
         }
@@ -120,14 +143,27 @@ fn flags_from(s: &mut Source) -> vk::BuildAccelerationStructureFlagsKHR {
 }
 
 fn geometry_flags(s: &mut Source) -> vk::GeometryFlagsKHR {
-    if s.chance(8) { vk::GeometryFlagsKHR::from_raw(s.u32()) } else { vk::GeometryFlagsKHR::from_raw(s.u8() as u32 & 3) }
+    if s.chance(8) {
+        vk::GeometryFlagsKHR::from_raw(s.u32())
+    } else {
+        vk::GeometryFlagsKHR::from_raw(s.u8() as u32 & 3)
+    }
 }
 
 fn vertex_format(s: &mut Source) -> vk::Format {
     match s.u8() % 8 {
         0..=3 => vk::Format::R32G32B32_SFLOAT,
-        4 | 5 => SUPPORTED_VERTEX_FORMATS[s.below(SUPPORTED_VERTEX_FORMATS.len() as u32) as usize].format,
-        6 => s.choose(&[vk::Format::UNDEFINED, vk::Format::R32_SFLOAT, vk::Format::R8_UNORM, vk::Format::B8G8R8A8_UNORM, vk::Format::R16G16B16A16_UINT, vk::Format::R32G32B32_UINT]),
+        4 | 5 => {
+            SUPPORTED_VERTEX_FORMATS[s.below(SUPPORTED_VERTEX_FORMATS.len() as u32) as usize].format
+        }
+        6 => s.choose(&[
+            vk::Format::UNDEFINED,
+            vk::Format::R32_SFLOAT,
+            vk::Format::R8_UNORM,
+            vk::Format::B8G8R8A8_UNORM,
+            vk::Format::R16G16B16A16_UINT,
+            vk::Format::R32G32B32_UINT,
+        ]),
         _ => vk::Format::from_raw(s.u32() as i32),
     }
 }
@@ -157,7 +193,11 @@ fn procedural(s: &mut Source, n: usize) -> (Vec<[f32; 3]>, bool) {
             _ => {
                 // Same centroid, different sizes: nested boxes.
                 let r = 1.0 + i as f32;
-                [if i % 3 == 0 { r } else { -r }, if i % 3 == 1 { r } else { -r }, if i % 3 == 2 { r } else { -r }]
+                [
+                    if i % 3 == 0 { r } else { -r },
+                    if i % 3 == 1 { r } else { -r },
+                    if i % 3 == 2 { r } else { -r },
+                ]
             }
         })
         .collect();
@@ -212,7 +252,11 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         _ => s.count(64) as u64 | if s.chance(16) { 1 << 32 } else { 0 },
     };
     let procedural_mode = s.chance(40);
-    let nverts = if procedural_mode { 3 * (1 + s.below(1400) as usize) } else { s.below(48) as usize };
+    let nverts = if procedural_mode {
+        3 * (1 + s.below(1400) as usize)
+    } else {
+        s.below(48) as usize
+    };
     let stride_bytes = (stride.max(vsize) as usize).min(64);
     let mut vertices = vec![0u8; nverts * stride_bytes + (s.below(8) as usize)];
     let is_f32 = info.is_some_and(|i| i.component == Component::F32);
@@ -222,7 +266,8 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         for (i, p) in pts.iter().enumerate() {
             for k in 0..3 {
                 if is_f32 && (k < 2 || vsize >= 12) {
-                    vertices[i * stride_bytes + 4 * k..i * stride_bytes + 4 * k + 4].copy_from_slice(&p[k].to_le_bytes());
+                    vertices[i * stride_bytes + 4 * k..i * stride_bytes + 4 * k + 4]
+                        .copy_from_slice(&p[k].to_le_bytes());
                 }
             }
         }
@@ -230,13 +275,19 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         for i in 0..nverts {
             for k in 0..(vsize as usize / 4) {
                 let v = coord(s, dirty);
-                vertices[i * stride_bytes + 4 * k..i * stride_bytes + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+                vertices[i * stride_bytes + 4 * k..i * stride_bytes + 4 * k + 4]
+                    .copy_from_slice(&v.to_le_bytes());
             }
         }
     } else {
         let raw = s.bytes(vertices.len());
         vertices[..raw.len()].copy_from_slice(raw);
-        if info.is_some_and(|i| matches!(i.component, Component::F16 | Component::F32 | Component::F64)) {
+        if info.is_some_and(|i| {
+            matches!(
+                i.component,
+                Component::F16 | Component::F32 | Component::F64
+            )
+        }) {
             *dirty = true;
         }
     }
@@ -253,7 +304,11 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         6 => vk::IndexType::UINT8_EXT,
         _ => vk::IndexType::from_raw(s.u32() as i32),
     };
-    let mut prims = if procedural_mode { nverts as u32 / 3 } else { s.count(16) };
+    let mut prims = if procedural_mode {
+        nverts as u32 / 3
+    } else {
+        s.count(16)
+    };
     if index_type == vk::IndexType::NONE_KHR && !procedural_mode && s.u8() % 2 == 0 {
         prims = nverts as u32 / 3;
     }
@@ -270,9 +325,17 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
     let indices = if index_type == vk::IndexType::NONE_KHR && !s.chance(8) {
         None
     } else {
-        let isize = if index_type == vk::IndexType::UINT16 { 2 } else { 4 };
+        let isize = if index_type == vk::IndexType::UINT16 {
+            2
+        } else {
+            4
+        };
         let n = 3 * (prims.min(2048) as usize) + primitive_offset.min(64) as usize / isize;
-        let n = if s.chance(24) { n.saturating_sub(1 + s.below(4) as usize) } else { n };
+        let n = if s.chance(24) {
+            n.saturating_sub(1 + s.below(4) as usize)
+        } else {
+            n
+        };
         let mut out = Vec::with_capacity(n * isize);
         let random = s.chance(128);
         let mut lcg = Lcg(s.u64());
@@ -292,7 +355,11 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         }
         Some(out)
     };
-    let transform_offset = if s.chance(32) { s.count(64) } else { 16 * s.below(2) };
+    let transform_offset = if s.chance(32) {
+        s.count(64)
+    } else {
+        16 * s.below(2)
+    };
     let transform = if s.u8() % 4 == 0 {
         let rows = transform_rows(s, dirty);
         let mut t = vec![0u8; transform_offset.min(256) as usize];
@@ -305,8 +372,21 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         None
     };
     (
-        GeomData::Triangles { format, vertices, stride, max_vertex, index_type, indices, transform },
-        BuildRangeInfo { primitive_count: prims, primitive_offset, first_vertex, transform_offset },
+        GeomData::Triangles {
+            format,
+            vertices,
+            stride,
+            max_vertex,
+            index_type,
+            indices,
+            transform,
+        },
+        BuildRangeInfo {
+            primitive_count: prims,
+            primitive_offset,
+            first_vertex,
+            transform_offset,
+        },
     )
 }
 
@@ -318,8 +398,16 @@ fn aabbs(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
         _ => s.count(64) as u64,
     };
     let procedural_mode = s.chance(40);
-    let n = if procedural_mode { 1 + s.below(3000) } else { s.count(16) };
-    let primitive_offset = if s.chance(32) { s.count(64) } else { 8 * s.below(3) };
+    let n = if procedural_mode {
+        1 + s.below(3000)
+    } else {
+        s.count(16)
+    };
+    let primitive_offset = if s.chance(32) {
+        s.count(64)
+    } else {
+        8 * s.below(3)
+    };
     let records = n.min(4096) as usize;
     let step = (stride.clamp(24, 64)) as usize;
     let mut data = vec![0u8; primitive_offset.min(64) as usize + records * step];
@@ -336,7 +424,14 @@ fn aabbs(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
             Some(p) => {
                 let c = p[i];
                 let e = 0.01 + (i % 7) as f32 * 0.1;
-                [c[0] - e, c[1] - e, c[2], c[0] + e, c[1] + e, c[2] + e * (i % 2) as f32]
+                [
+                    c[0] - e,
+                    c[1] - e,
+                    c[2],
+                    c[0] + e,
+                    c[1] + e,
+                    c[2] + e * (i % 2) as f32,
+                ]
             }
             None => {
                 let lo = [coord(s, dirty), coord(s, dirty), coord(s, dirty)];
@@ -345,8 +440,19 @@ fn aabbs(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
                     1 => [lo[0], lo[1], lo[2], lo[0] - 1.0, lo[1], lo[2]],
                     2 => [lo[0], f32::NAN, lo[2], lo[0], lo[1], lo[2]],
                     _ => {
-                        let e = [s.u8() as f32 / 16.0, s.u8() as f32 / 16.0, s.u8() as f32 / 16.0];
-                        [lo[0], lo[1], lo[2], lo[0] + e[0], lo[1] + e[1], lo[2] + e[2]]
+                        let e = [
+                            s.u8() as f32 / 16.0,
+                            s.u8() as f32 / 16.0,
+                            s.u8() as f32 / 16.0,
+                        ];
+                        [
+                            lo[0],
+                            lo[1],
+                            lo[2],
+                            lo[0] + e[0],
+                            lo[1] + e[1],
+                            lo[2] + e[2],
+                        ]
                     }
                 }
             }
@@ -363,7 +469,15 @@ fn aabbs(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
     if s.chance(16) {
         data.truncate(s.below(data.len() as u32 + 1) as usize);
     }
-    (GeomData::Aabbs { data, stride }, BuildRangeInfo { primitive_count: n, primitive_offset, first_vertex: 0, transform_offset: 0 })
+    (
+        GeomData::Aabbs { data, stride },
+        BuildRangeInfo {
+            primitive_count: n,
+            primitive_offset,
+            first_vertex: 0,
+            transform_offset: 0,
+        },
+    )
 }
 
 fn instance_bytes(s: &mut Source, dirty: &mut bool, infos_in_call: usize) -> Vec<u8> {
@@ -382,7 +496,11 @@ fn instance_bytes(s: &mut Source, dirty: &mut bool, infos_in_call: usize) -> Vec
         13 => REF_DST + s.below(infos_in_call as u32) as u64,
         _ => s.u64(),
     };
-    let flags = if s.chance(16) { s.u8() as u32 } else { s.u8() as u32 & 0xf & !(if s.bool() { 0x8 } else { 0 }) };
+    let flags = if s.chance(16) {
+        s.u8() as u32
+    } else {
+        s.u8() as u32 & 0xf & !(if s.bool() { 0x8 } else { 0 })
+    };
     let inst = hostas::Instance {
         transform,
         custom_index: s.u32(),
@@ -397,10 +515,16 @@ fn instance_bytes(s: &mut Source, dirty: &mut bool, infos_in_call: usize) -> Vec
 fn instances(s: &mut Source, dirty: &mut bool, infos_in_call: usize) -> (GeomData, BuildRangeInfo) {
     let n = s.below(12) as usize;
     let pointers = s.chance(64);
-    let primitive_offset = if s.chance(32) { s.count(64) } else { 16 * s.below(2) };
+    let primitive_offset = if s.chance(32) {
+        s.count(64)
+    } else {
+        16 * s.below(2)
+    };
     let count = if s.chance(24) { s.count(16) } else { n as u32 };
     let data = if pointers {
-        let mut v: Vec<Vec<u8>> = (0..primitive_offset.min(256) as usize / 8).map(|_| vec![0u8; 64]).collect();
+        let mut v: Vec<Vec<u8>> = (0..primitive_offset.min(256) as usize / 8)
+            .map(|_| vec![0u8; 64])
+            .collect();
         for _ in 0..n {
             let mut b = instance_bytes(s, dirty, infos_in_call);
             if s.chance(8) {
@@ -419,15 +543,33 @@ fn instances(s: &mut Source, dirty: &mut bool, infos_in_call: usize) -> (GeomDat
         }
         GeomData::InstanceArray(v)
     };
-    (data, BuildRangeInfo { primitive_count: count, primitive_offset, first_vertex: 0, transform_offset: 0 })
+    (
+        data,
+        BuildRangeInfo {
+            primitive_count: count,
+            primitive_offset,
+            first_vertex: 0,
+            transform_offset: 0,
+        },
+    )
 }
 
-fn info(s: &mut Source, dirty: &mut bool, earlier: &[InfoDesc], infos_in_call: usize, index: usize) -> InfoDesc {
+fn info(
+    s: &mut Source,
+    dirty: &mut bool,
+    earlier: &[InfoDesc],
+    infos_in_call: usize,
+    index: usize,
+) -> InfoDesc {
     // An update of a structure an earlier call built, with the same description and new data.
     if !earlier.is_empty() && s.u8() % 3 == 0 {
         let k = s.below(earlier.len() as u32) as u8;
         let mut d = earlier[k as usize].clone();
-        d.mode = if s.chance(240) { vk::BuildAccelerationStructureModeKHR::UPDATE } else { vk::BuildAccelerationStructureModeKHR::BUILD };
+        d.mode = if s.chance(240) {
+            vk::BuildAccelerationStructureModeKHR::UPDATE
+        } else {
+            vk::BuildAccelerationStructureModeKHR::BUILD
+        };
         d.src = Some(SrcChoice::Built(k));
         d.dst = match s.u8() % 4 {
             0 | 1 => Dst::Built(k),
@@ -442,7 +584,9 @@ fn info(s: &mut Source, dirty: &mut bool, earlier: &[InfoDesc], infos_in_call: u
         }
         for g in &mut d.geoms {
             let bytes = match &mut g.data {
-                GeomData::Triangles { vertices, indices, .. } => {
+                GeomData::Triangles {
+                    vertices, indices, ..
+                } => {
                     if s.chance(32) {
                         if let Some(ix) = indices {
                             for b in ix.iter_mut().take(64) {
@@ -477,10 +621,24 @@ fn info(s: &mut Source, dirty: &mut bool, earlier: &[InfoDesc], infos_in_call: u
     }
     let kind = s.u8() % 8;
     let (ty, n_geoms) = match kind {
-        0..=2 => (vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, 1 + s.below(3)),
-        3 | 4 => (vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, 1 + s.below(3)),
+        0..=2 => (
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            1 + s.below(3),
+        ),
+        3 | 4 => (
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            1 + s.below(3),
+        ),
         5 | 6 => (vk::AccelerationStructureTypeKHR::TOP_LEVEL, 1),
-        _ => (s.choose(&[vk::AccelerationStructureTypeKHR::GENERIC, vk::AccelerationStructureTypeKHR::TOP_LEVEL, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, vk::AccelerationStructureTypeKHR::from_raw(7)]), s.below(4)),
+        _ => (
+            s.choose(&[
+                vk::AccelerationStructureTypeKHR::GENERIC,
+                vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                vk::AccelerationStructureTypeKHR::from_raw(7),
+            ]),
+            s.below(4),
+        ),
     };
     let geoms = (0..n_geoms)
         .map(|_| {
@@ -495,11 +653,19 @@ fn info(s: &mut Source, dirty: &mut bool, earlier: &[InfoDesc], infos_in_call: u
                 1 => aabbs(s, dirty),
                 _ => instances(s, dirty, infos_in_call),
             };
-            GeomDesc { data, flags: geometry_flags(s), range }
+            GeomDesc {
+                data,
+                flags: geometry_flags(s),
+                range,
+            }
         })
         .collect();
     let dst = match s.u8() % 16 {
-        0..=8 => Dst::Fresh(if s.chance(16) { vk::AccelerationStructureTypeKHR::from_raw(s.below(3) as i32) } else { ty }),
+        0..=8 => Dst::Fresh(if s.chance(16) {
+            vk::AccelerationStructureTypeKHR::from_raw(s.below(3) as i32)
+        } else {
+            ty
+        }),
         9 => Dst::Short(s.choose(&[1, 64, 128, 4096])),
         10 => Dst::Null,
         11 => Dst::SameAsInfo(s.below(index.max(1) as u32) as u8),
@@ -521,14 +687,34 @@ fn info(s: &mut Source, dirty: &mut bool, earlier: &[InfoDesc], infos_in_call: u
     };
     let scratch = match s.u8() % 16 {
         0..=10 => Scratch::Exact { misalign: 0 },
-        11 => Scratch::Exact { misalign: 1 + s.below(63) as u8 },
+        11 => Scratch::Exact {
+            misalign: 1 + s.below(63) as u8,
+        },
         12 => Scratch::Short,
         13 => Scratch::Null,
         _ => Scratch::Big,
     };
-    let ranges_delta = if s.chance(8) { if s.bool() { -1 } else { 1 } } else { 0 };
-    let size_counts = if s.chance(16) { Some((0..s.below(4)).map(|_| s.count(16)).collect()) } else { None };
-    InfoDesc { ty, flags: flags_from(s), mode, geoms, dst, src, scratch, ranges_delta, size_counts }
+    let ranges_delta = if s.chance(8) {
+        if s.bool() { -1 } else { 1 }
+    } else {
+        0
+    };
+    let size_counts = if s.chance(16) {
+        Some((0..s.below(4)).map(|_| s.count(16)).collect())
+    } else {
+        None
+    };
+    InfoDesc {
+        ty,
+        flags: flags_from(s),
+        mode,
+        geoms,
+        dst,
+        src,
+        scratch,
+        ranges_delta,
+        size_counts,
+    }
 }
 
 impl Case {
@@ -539,7 +725,11 @@ impl Case {
         let mut earlier: Vec<InfoDesc> = Vec::new();
         let n_calls = 1 + s.below(3);
         for _ in 0..n_calls {
-            let n_infos = 1 + if s.chance(48) { 1 + s.below(2) as usize } else { 0 };
+            let n_infos = 1 + if s.chance(48) {
+                1 + s.below(2) as usize
+            } else {
+                0
+            };
             let mut infos = Vec::new();
             for i in 0..n_infos {
                 infos.push(info(&mut s, &mut dirty, &earlier, n_infos, i));
@@ -583,7 +773,18 @@ pub fn run_case(case: &Case) -> Outcome {
         // Owned views: pointer arrays, geometries, ranges.
         let ptrs: Vec<Vec<Vec<&[u8]>>> = infos
             .iter()
-            .map(|i| i.geoms.iter().map(|g| if let GeomData::InstancePointers(v) = &g.data { v.iter().map(|b| &b[..]).collect() } else { Vec::new() }).collect())
+            .map(|i| {
+                i.geoms
+                    .iter()
+                    .map(|g| {
+                        if let GeomData::InstancePointers(v) = &g.data {
+                            v.iter().map(|b| &b[..]).collect()
+                        } else {
+                            Vec::new()
+                        }
+                    })
+                    .collect()
+            })
             .collect();
         // Instance references resolved: symbolic values become handles.
         let mut dst_handles: Vec<Option<AccelerationStructure>> = vec![None; infos.len()];
@@ -591,24 +792,52 @@ pub fn run_case(case: &Case) -> Outcome {
         let mut fresh_sizes = vec![None; infos.len()];
         for (i, inf) in infos.iter().enumerate() {
             let probe_geoms = geometries(inf, &ptrs[i], &[]);
-            let probe = BuildGeometryInfo { ty: inf.ty, flags: inf.flags, mode: inf.mode, src: None, dst: None, geometries: &probe_geoms, scratch: None };
-            let counts: Vec<u32> = inf.size_counts.clone().unwrap_or_else(|| inf.geoms.iter().map(|g| g.range.primitive_count).collect());
+            let probe = BuildGeometryInfo {
+                ty: inf.ty,
+                flags: inf.flags,
+                mode: inf.mode,
+                src: None,
+                dst: None,
+                geometries: &probe_geoms,
+                scratch: None,
+            };
+            let counts: Vec<u32> = inf
+                .size_counts
+                .clone()
+                .unwrap_or_else(|| inf.geoms.iter().map(|g| g.range.primitive_count).collect());
             let sizes = d.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts);
             if inf.size_counts.is_none() {
                 // Device builds are not supported: refused, never a panic.
-                assert!(d.build_sizes(vk::AccelerationStructureBuildTypeKHR::DEVICE, &probe, &counts).is_err());
+                assert!(
+                    d.build_sizes(
+                        vk::AccelerationStructureBuildTypeKHR::DEVICE,
+                        &probe,
+                        &counts
+                    )
+                    .is_err()
+                );
             }
             if let Ok(sz) = &sizes {
-                assert!(sz.acceleration_structure_size > 0 && sz.build_scratch_size > 0 && sz.update_scratch_size > 0, "zero size from build_sizes: {sz:?}");
+                assert!(
+                    sz.acceleration_structure_size > 0
+                        && sz.build_scratch_size > 0
+                        && sz.update_scratch_size > 0,
+                    "zero size from build_sizes: {sz:?}"
+                );
             }
-            fresh_sizes[i] = sizes.ok().filter(|s| s.acceleration_structure_size <= MAX_ALLOC && s.build_scratch_size <= MAX_ALLOC);
+            fresh_sizes[i] = sizes.ok().filter(|s| {
+                s.acceleration_structure_size <= MAX_ALLOC && s.build_scratch_size <= MAX_ALLOC
+            });
             let size = fresh_sizes[i].map_or(4096, |s| s.acceleration_structure_size);
             dst_handles[i] = match inf.dst {
                 Dst::Fresh(ty) => create(d, ty, size).ok(),
                 Dst::Short(n) => create(d, inf.ty, size.saturating_sub(n as u64).max(1)).ok(),
                 Dst::Null => None,
                 Dst::SameAsInfo(k) => dst_handles.get(k as usize).copied().flatten(),
-                Dst::Built(k) => built.get(k as usize).and_then(|b| b.as_ref()).map(|b| b.handle),
+                Dst::Built(k) => built
+                    .get(k as usize)
+                    .and_then(|b| b.as_ref())
+                    .map(|b| b.handle),
                 Dst::FixtureBlas => Some(fx.tri_blas),
                 Dst::Garbage(h) => Some(AccelerationStructure(h)),
                 Dst::SharedBuffer { overlap } => {
@@ -620,12 +849,18 @@ pub fn run_case(case: &Case) -> Outcome {
                             Err(_) => continue,
                         },
                     };
-                    let r = d.create_acceleration_structure(&AccelerationStructureCreateInfo { buffer: Some(buffer.clone()), offset, ..AccelerationStructureCreateInfo::new(inf.ty, placed) });
+                    let r = d.create_acceleration_structure(&AccelerationStructureCreateInfo {
+                        buffer: Some(buffer.clone()),
+                        offset,
+                        ..AccelerationStructureCreateInfo::new(inf.ty, placed)
+                    });
                     shared_prev = Some((buffer, offset, placed));
                     r.ok()
                 }
             };
-            if let (Dst::Fresh(_) | Dst::Short(_) | Dst::SharedBuffer { .. }, Some(h)) = (inf.dst, dst_handles[i]) {
+            if let (Dst::Fresh(_) | Dst::Short(_) | Dst::SharedBuffer { .. }, Some(h)) =
+                (inf.dst, dst_handles[i])
+            {
                 all_created.push(h);
             }
         }
@@ -636,17 +871,46 @@ pub fn run_case(case: &Case) -> Outcome {
                 REF_TLAS => fx.tlas.raw(),
                 REF_UNBUILT => fx.unbuilt.raw(),
                 REF_DESTROYED => fx.destroyed,
-                r if (REF_BUILT..REF_BUILT + 8).contains(&r) => built.get((r - REF_BUILT) as usize).and_then(|b| b.as_ref()).map_or(0x1234_5600, |b| b.handle.raw()),
-                r if (REF_DST..REF_DST + 8).contains(&r) => dst_handles.get((r - REF_DST) as usize).copied().flatten().map_or(0, |h| h.raw()),
+                r if (REF_BUILT..REF_BUILT + 8).contains(&r) => built
+                    .get((r - REF_BUILT) as usize)
+                    .and_then(|b| b.as_ref())
+                    .map_or(0x1234_5600, |b| b.handle.raw()),
+                r if (REF_DST..REF_DST + 8).contains(&r) => dst_handles
+                    .get((r - REF_DST) as usize)
+                    .copied()
+                    .flatten()
+                    .map_or(0, |h| h.raw()),
                 r => r,
             }
         };
-        let resolved: Vec<Vec<GeomData>> = infos.iter().map(|i| i.geoms.iter().map(|g| resolve_refs(&g.data, &resolve)).collect()).collect();
+        let resolved: Vec<Vec<GeomData>> = infos
+            .iter()
+            .map(|i| {
+                i.geoms
+                    .iter()
+                    .map(|g| resolve_refs(&g.data, &resolve))
+                    .collect()
+            })
+            .collect();
         let rptrs: Vec<Vec<Vec<&[u8]>>> = resolved
             .iter()
-            .map(|gs| gs.iter().map(|g| if let GeomData::InstancePointers(v) = g { v.iter().map(|b| &b[..]).collect() } else { Vec::new() }).collect())
+            .map(|gs| {
+                gs.iter()
+                    .map(|g| {
+                        if let GeomData::InstancePointers(v) = g {
+                            v.iter().map(|b| &b[..]).collect()
+                        } else {
+                            Vec::new()
+                        }
+                    })
+                    .collect()
+            })
             .collect();
-        let geoms: Vec<Vec<Geometry>> = infos.iter().enumerate().map(|(i, inf)| geometries(inf, &rptrs[i], &resolved[i])).collect();
+        let geoms: Vec<Vec<Geometry>> = infos
+            .iter()
+            .enumerate()
+            .map(|(i, inf)| geometries(inf, &rptrs[i], &resolved[i]))
+            .collect();
         let ranges: Vec<Vec<BuildRangeInfo>> = infos
             .iter()
             .map(|inf| {
@@ -665,7 +929,13 @@ pub fn run_case(case: &Case) -> Outcome {
             .iter()
             .enumerate()
             .map(|(i, inf)| {
-                let need = fresh_sizes[i].map_or(4096, |s| if inf.mode == vk::BuildAccelerationStructureModeKHR::UPDATE { s.update_scratch_size } else { s.build_scratch_size });
+                let need = fresh_sizes[i].map_or(4096, |s| {
+                    if inf.mode == vk::BuildAccelerationStructureModeKHR::UPDATE {
+                        s.update_scratch_size
+                    } else {
+                        s.build_scratch_size
+                    }
+                });
                 match inf.scratch {
                     Scratch::Exact { misalign } => vec![0u8; need as usize + misalign as usize],
                     Scratch::Short => vec![0u8; need.saturating_sub(1) as usize],
@@ -682,23 +952,50 @@ pub fn run_case(case: &Case) -> Outcome {
                 Scratch::Exact { misalign } => Some(&mut scratch[misalign as usize..]),
                 _ => Some(&mut scratch[..]),
             };
-            exact &= matches!(inf.scratch, Scratch::Exact { .. } | Scratch::Big) && matches!(inf.dst, Dst::Fresh(_)) && fresh_sizes[i].is_some();
+            exact &= matches!(inf.scratch, Scratch::Exact { .. } | Scratch::Big)
+                && matches!(inf.dst, Dst::Fresh(_))
+                && fresh_sizes[i].is_some();
             let src = match inf.src {
                 None => None,
-                Some(SrcChoice::Built(k)) => built.get(k as usize).and_then(|b| b.as_ref()).map(|b| b.handle),
+                Some(SrcChoice::Built(k)) => built
+                    .get(k as usize)
+                    .and_then(|b| b.as_ref())
+                    .map(|b| b.handle),
                 Some(SrcChoice::Dst) => dst_handles[i],
                 Some(SrcChoice::Garbage(h)) => Some(AccelerationStructure(h)),
             };
-            build_infos.push(BuildGeometryInfo { ty: inf.ty, flags: inf.flags, mode: inf.mode, src, dst: dst_handles[i], geometries: &geoms[i], scratch });
+            build_infos.push(BuildGeometryInfo {
+                ty: inf.ty,
+                flags: inf.flags,
+                mode: inf.mode,
+                src,
+                dst: dst_handles[i],
+                geometries: &geoms[i],
+                scratch,
+            });
         }
         let range_refs: Vec<&[BuildRangeInfo]> = ranges.iter().map(|r| &r[..]).collect();
         let result = d.build_acceleration_structures(&mut build_infos, &range_refs);
         if let Err(e) = &result {
             // Exactly sized destinations and scratch never run out of space.
-            if exact && infos.iter().all(|i| i.mode == vk::BuildAccelerationStructureModeKHR::BUILD && i.size_counts.is_none() && i.ranges_delta == 0) {
+            if exact
+                && infos.iter().all(|i| {
+                    i.mode == vk::BuildAccelerationStructureModeKHR::BUILD
+                        && i.size_counts.is_none()
+                        && i.ranges_delta == 0
+                })
+            {
                 let v = e.vuid_str().unwrap_or("");
                 assert!(
-                    !v.ends_with("-03675") && !v.ends_with("-03725") && !matches!(e, hostas::Error::RangeTooShort { what: "scratch" | "acceleration structure", .. }),
+                    !v.ends_with("-03675")
+                        && !v.ends_with("-03725")
+                        && !matches!(
+                            e,
+                            hostas::Error::RangeTooShort {
+                                what: "scratch" | "acceleration structure",
+                                ..
+                            }
+                        ),
                     "a build with the sizes from build_sizes ran out of space: {e}"
                 );
             }
@@ -710,7 +1007,10 @@ pub fn run_case(case: &Case) -> Outcome {
         }
         for (i, inf) in infos.iter().enumerate() {
             let entry = match (ok, dst_handles[i]) {
-                (true, Some(h)) => Some(Built { handle: h, top: inf.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL }),
+                (true, Some(h)) => Some(Built {
+                    handle: h,
+                    top: inf.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+                }),
                 _ => None,
             };
             if let Some(b) = &entry {
@@ -753,19 +1053,33 @@ fn resolve_refs(g: &GeomData, resolve: &impl Fn(u64) -> u64) -> GeomData {
             }
             GeomData::InstanceArray(out)
         }
-        GeomData::InstancePointers(v) => GeomData::InstancePointers(v.iter().map(|b| fix(b)).collect()),
+        GeomData::InstancePointers(v) => {
+            GeomData::InstancePointers(v.iter().map(|b| fix(b)).collect())
+        }
         other => other.clone(),
     }
 }
 
-fn geometries<'a>(inf: &'a InfoDesc, ptrs: &'a [Vec<&'a [u8]>], resolved: &'a [GeomData]) -> Vec<Geometry<'a>> {
+fn geometries<'a>(
+    inf: &'a InfoDesc,
+    ptrs: &'a [Vec<&'a [u8]>],
+    resolved: &'a [GeomData],
+) -> Vec<Geometry<'a>> {
     inf.geoms
         .iter()
         .enumerate()
         .map(|(gi, g)| {
             let data = resolved.get(gi).unwrap_or(&g.data);
             let gd = match data {
-                GeomData::Triangles { format, vertices, stride, max_vertex, index_type, indices, transform } => hostas::GeometryData::Triangles(hostas::TrianglesData {
+                GeomData::Triangles {
+                    format,
+                    vertices,
+                    stride,
+                    max_vertex,
+                    index_type,
+                    indices,
+                    transform,
+                } => hostas::GeometryData::Triangles(hostas::TrianglesData {
                     vertex_format: *format,
                     vertex_data: vertices,
                     vertex_stride: *stride,
@@ -774,11 +1088,23 @@ fn geometries<'a>(inf: &'a InfoDesc, ptrs: &'a [Vec<&'a [u8]>], resolved: &'a [G
                     index_data: indices.as_deref(),
                     transform_data: transform.as_deref(),
                 }),
-                GeomData::Aabbs { data, stride } => hostas::GeometryData::Aabbs(hostas::AabbsData { data, stride: *stride }),
-                GeomData::InstanceArray(v) => hostas::GeometryData::Instances(InstancesData::Array(v)),
-                GeomData::InstancePointers(_) => hostas::GeometryData::Instances(InstancesData::Pointers(&ptrs[gi])),
+                GeomData::Aabbs { data, stride } => {
+                    hostas::GeometryData::Aabbs(hostas::AabbsData {
+                        data,
+                        stride: *stride,
+                    })
+                }
+                GeomData::InstanceArray(v) => {
+                    hostas::GeometryData::Instances(InstancesData::Array(v))
+                }
+                GeomData::InstancePointers(_) => {
+                    hostas::GeometryData::Instances(InstancesData::Pointers(&ptrs[gi]))
+                }
             };
-            Geometry { data: gd, flags: g.flags }
+            Geometry {
+                data: gd,
+                flags: g.flags,
+            }
         })
         .collect()
 }
@@ -788,11 +1114,20 @@ fn check_built(fx: &Fixture, b: &Built, dirty: bool, created: &mut Vec<Accelerat
     let d = &fx.device;
     let stats = d.statistics(b.handle).expect("a built structure parses");
     let (_, _, size) = d.placement(b.handle).expect("placement");
-    assert!(stats.used_bytes <= size, "used size {} exceeds the allocation {size}", stats.used_bytes);
+    assert!(
+        stats.used_bytes <= size,
+        "used size {} exceeds the allocation {size}",
+        stats.used_bytes
+    );
     assert_eq!(stats.top_level, b.top, "built type");
     let ser = d.serialize(b.handle).expect("serialize a built structure");
-    let back = d.deserialize(&ser).expect("deserialize what serialize wrote");
-    assert!(d.serialize(back).expect("serialize again") == ser, "serialize(deserialize(x)) != x");
+    let back = d
+        .deserialize(&ser)
+        .expect("deserialize what serialize wrote");
+    assert!(
+        d.serialize(back).expect("serialize again") == ser,
+        "serialize(deserialize(x)) != x"
+    );
     created.push(back);
     let bytes = {
         let (buffer, offset, size) = d.placement(b.handle).expect("placement");
@@ -807,7 +1142,12 @@ fn check_built(fx: &Fixture, b: &Built, dirty: bool, created: &mut Vec<Accelerat
         let scene = d.scene(b.handle).expect("scene of a built TLAS");
         trace_rays(&scene, &rays, strict);
     } else {
-        let t = hostas::quick::build_tlas(d, &instances_of(b.handle), vk::BuildAccelerationStructureFlagsKHR::empty()).expect("a TLAS over a built BLAS");
+        let t = hostas::quick::build_tlas(
+            d,
+            &instances_of(b.handle),
+            vk::BuildAccelerationStructureFlagsKHR::empty(),
+        )
+        .expect("a TLAS over a built BLAS");
         created.push(t);
         let scene = d.scene(t).expect("scene");
         trace_rays(&scene, &rays, strict);

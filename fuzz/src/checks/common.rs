@@ -1,7 +1,10 @@
 //! What every target shares: a small fixture of real structures on a fresh device, probe
 //! rays, and the tracing checks.
 
-use hostas::{AccelerationStructure, AccelerationStructureCreateInfo, Affine, Device, Hit, HitKind, Ray, RayFlags, Scene, vk};
+use hostas::{
+    AccelerationStructure, AccelerationStructureCreateInfo, Affine, Device, Hit, HitKind, Ray,
+    RayFlags, Scene, vk,
+};
 
 /// Largest structure, scratch or buffer a target allocates on behalf of an input: inputs that
 /// ask for more are still passed to the size checks, with a small allocation.
@@ -29,26 +32,70 @@ pub struct Fixture {
     pub destroyed: u64,
 }
 
-pub const TRI_FLAGS: vk::BuildAccelerationStructureFlagsKHR = vk::BuildAccelerationStructureFlagsKHR::from_raw(
-    vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw() | vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw(),
-);
+pub const TRI_FLAGS: vk::BuildAccelerationStructureFlagsKHR =
+    vk::BuildAccelerationStructureFlagsKHR::from_raw(
+        vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw()
+            | vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw(),
+    );
 
 impl Fixture {
     pub fn new() -> Fixture {
         let device = Device::new();
-        let positions = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.5]];
-        let tri_blas = hostas::quick::build_triangle_blas(&device, &positions, &[[0, 1, 2], [1, 3, 2]], TRI_FLAGS).expect("fixture triangles");
-        let boxes = [
-            hostas::Aabb { lo: [-1.0, -1.0, -1.0], hi: [-0.5, -0.5, -0.5] },
-            hostas::Aabb { lo: [0.25, 0.25, 0.25], hi: [0.75, 0.75, 1.0] },
+        let positions = [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.5],
         ];
-        let aabb_blas = hostas::quick::build_aabb_blas(&device, &boxes, vk::GeometryFlagsKHR::empty(), vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION)
-            .expect("fixture boxes");
-        let tlas = hostas::quick::build_single_instance_tlas(&device, tri_blas).expect("fixture tlas");
-        let unbuilt = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, 4096)).expect("unbuilt");
-        let gone = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, 256)).expect("gone");
-        device.destroy_acceleration_structure(gone).expect("destroy");
-        Fixture { device, tri_blas, aabb_blas, tlas, unbuilt, destroyed: gone.raw() }
+        let tri_blas = hostas::quick::build_triangle_blas(
+            &device,
+            &positions,
+            &[[0, 1, 2], [1, 3, 2]],
+            TRI_FLAGS,
+        )
+        .expect("fixture triangles");
+        let boxes = [
+            hostas::Aabb {
+                lo: [-1.0, -1.0, -1.0],
+                hi: [-0.5, -0.5, -0.5],
+            },
+            hostas::Aabb {
+                lo: [0.25, 0.25, 0.25],
+                hi: [0.75, 0.75, 1.0],
+            },
+        ];
+        let aabb_blas = hostas::quick::build_aabb_blas(
+            &device,
+            &boxes,
+            vk::GeometryFlagsKHR::empty(),
+            vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION,
+        )
+        .expect("fixture boxes");
+        let tlas =
+            hostas::quick::build_single_instance_tlas(&device, tri_blas).expect("fixture tlas");
+        let unbuilt = device
+            .create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                4096,
+            ))
+            .expect("unbuilt");
+        let gone = device
+            .create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                256,
+            ))
+            .expect("gone");
+        device
+            .destroy_acceleration_structure(gone)
+            .expect("destroy");
+        Fixture {
+            device,
+            tri_blas,
+            aabb_blas,
+            tlas,
+            unbuilt,
+            destroyed: gone.raw(),
+        }
     }
 }
 
@@ -59,21 +106,51 @@ impl Default for Fixture {
 }
 
 /// Creates a structure of `size` bytes (clamped to `1..=MAX_ALLOC`).
-pub fn create(device: &Device, ty: vk::AccelerationStructureTypeKHR, size: u64) -> hostas::Result<AccelerationStructure> {
-    device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(ty, size.clamp(1, MAX_ALLOC)))
+pub fn create(
+    device: &Device,
+    ty: vk::AccelerationStructureTypeKHR,
+    size: u64,
+) -> hostas::Result<AccelerationStructure> {
+    device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+        ty,
+        size.clamp(1, MAX_ALLOC),
+    ))
 }
 
 /// Rays around and through the box `lo..hi` (or the unit cube when it is not finite), with
 /// a spread of flags and masks; a few are invalid on purpose.
 pub fn probe_rays(lo: [f32; 3], hi: [f32; 3]) -> Vec<Ray> {
-    let finite = lo.iter().chain(&hi).all(|v| v.is_finite() && v.abs() < 1e15) && (0..3).all(|k| lo[k] <= hi[k]);
-    let (lo, hi) = if finite { (lo, hi) } else { ([-1.0; 3], [1.0; 3]) };
-    let c = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])];
+    let finite = lo
+        .iter()
+        .chain(&hi)
+        .all(|v| v.is_finite() && v.abs() < 1e15)
+        && (0..3).all(|k| lo[k] <= hi[k]);
+    let (lo, hi) = if finite {
+        (lo, hi)
+    } else {
+        ([-1.0; 3], [1.0; 3])
+    };
+    let c = [
+        0.5 * (lo[0] + hi[0]),
+        0.5 * (lo[1] + hi[1]),
+        0.5 * (lo[2] + hi[2]),
+    ];
     let e = (0..3).map(|k| hi[k] - lo[k]).fold(1.0f32, f32::max);
     let mut rays = Vec::new();
-    let dirs = [[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.3, 0.2, -1.0], [-0.7, 0.5, 0.1]];
+    let dirs = [
+        [0.0, 0.0, -1.0],
+        [0.0, 0.0, 1.0],
+        [1.0, 0.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.3, 0.2, -1.0],
+        [-0.7, 0.5, 0.1],
+    ];
     for (i, d) in dirs.iter().enumerate() {
-        let o = [c[0] - d[0] * 2.0 * e + 0.1 * i as f32 * e, c[1] - d[1] * 2.0 * e, c[2] - d[2] * 2.0 * e];
+        let o = [
+            c[0] - d[0] * 2.0 * e + 0.1 * i as f32 * e,
+            c[1] - d[1] * 2.0 * e,
+            c[2] - d[2] * 2.0 * e,
+        ];
         rays.push(Ray::new(o, *d));
     }
     // Through a corner, from inside, with flags, masks and short ranges.
@@ -86,7 +163,14 @@ pub fn probe_rays(lo: [f32; 3], hi: [f32; 3]) -> Vec<Ray> {
         RayFlags::SKIP_AABBS | RayFlags::TERMINATE_ON_FIRST_HIT,
     ];
     for (i, f) in flags.iter().enumerate() {
-        let mut r = Ray::new([lo[0] - e, lo[1] - e * 0.5, lo[2] - e], [e + c[0] - lo[0], e * 0.5 + c[1] - lo[1], e + c[2] - lo[2] + 0.01 * i as f32]);
+        let mut r = Ray::new(
+            [lo[0] - e, lo[1] - e * 0.5, lo[2] - e],
+            [
+                e + c[0] - lo[0],
+                e * 0.5 + c[1] - lo[1],
+                e + c[2] - lo[2] + 0.01 * i as f32,
+            ],
+        );
         r.flags = *f;
         r.cull_mask = if i % 3 == 0 { 0x01 } else { 0xff };
         rays.push(r);
@@ -114,8 +198,20 @@ pub fn probe_rays(lo: [f32; 3], hi: [f32; 3]) -> Vec<Ray> {
 pub fn check_hit_range(ray: &Ray, h: &Hit, what: &str) {
     match h.kind {
         HitKind::Miss => {}
-        HitKind::Triangle => assert!(ray.t_min < h.t && h.t < ray.t_max, "{what}: triangle hit t {} outside ({}, {}) for {ray:?}", h.t, ray.t_min, ray.t_max),
-        HitKind::Generated => assert!(ray.t_min <= h.t && h.t <= ray.t_max, "{what}: generated hit t {} outside [{}, {}] for {ray:?}", h.t, ray.t_min, ray.t_max),
+        HitKind::Triangle => assert!(
+            ray.t_min < h.t && h.t < ray.t_max,
+            "{what}: triangle hit t {} outside ({}, {}) for {ray:?}",
+            h.t,
+            ray.t_min,
+            ray.t_max
+        ),
+        HitKind::Generated => assert!(
+            ray.t_min <= h.t && h.t <= ray.t_max,
+            "{what}: generated hit t {} outside [{}, {}] for {ray:?}",
+            h.t,
+            ray.t_min,
+            ray.t_max
+        ),
     }
 }
 
@@ -134,9 +230,16 @@ pub fn trace_rays(scene: &Scene, rays: &[Ray], strict: bool) {
                 check_hit_range(ray, &c, "closest");
                 check_hit_range(ray, &a, "any");
                 if strict {
-                    assert_eq!(c.is_hit(), a.is_hit(), "closest {c:?} and any-hit {a:?} disagree for {ray:?}");
+                    assert_eq!(
+                        c.is_hit(),
+                        a.is_hit(),
+                        "closest {c:?} and any-hit {a:?} disagree for {ray:?}"
+                    );
                     if c.is_hit() {
-                        assert!(a.t >= c.t, "any-hit {a:?} is closer than the closest hit {c:?} for {ray:?}");
+                        assert!(
+                            a.t >= c.t,
+                            "any-hit {a:?} is closer than the closest hit {c:?} for {ray:?}"
+                        );
                     }
                 }
             }
@@ -147,12 +250,23 @@ pub fn trace_rays(scene: &Scene, rays: &[Ray], strict: bool) {
 
 /// A ray query driven by `decide` (a stream of decision bytes), with the state machine's
 /// invariants checked after every step. Returns how many candidates were seen.
-pub fn walk_query(scene: &Scene, ray: &Ray, mut decide: impl FnMut() -> u8, step_limit: usize) -> usize {
+pub fn walk_query(
+    scene: &Scene,
+    ray: &Ray,
+    mut decide: impl FnMut() -> u8,
+    step_limit: usize,
+) -> usize {
     let Ok(mut q) = scene.ray_query(ray) else {
-        assert!(ray.validate().is_err(), "ray query refused a valid ray {ray:?}");
+        assert!(
+            ray.validate().is_err(),
+            "ray query refused a valid ray {ray:?}"
+        );
         return 0;
     };
-    assert!(ray.validate().is_ok(), "ray query accepted an invalid ray {ray:?}");
+    assert!(
+        ray.validate().is_ok(),
+        "ray query accepted an invalid ray {ray:?}"
+    );
     let mut seen = 0;
     let mut t_max = ray.t_max;
     while q.proceed() {
@@ -161,15 +275,31 @@ pub fn walk_query(scene: &Scene, ray: &Ray, mut decide: impl FnMut() -> u8, step
             t_max = q.committed().t;
         }
         seen += 1;
-        assert!(seen <= step_limit, "ray query yields more than {step_limit} candidates for {ray:?}");
+        assert!(
+            seen <= step_limit,
+            "ray query yields more than {step_limit} candidates for {ray:?}"
+        );
         let c = *q.candidate();
         match c.candidate_type() {
             Some(hostas::CandidateType::Triangle) => {
-                assert!(ray.t_min < c.t && c.t < t_max, "triangle candidate t {} outside ({}, {t_max})", c.t, ray.t_min);
-                assert!(!c.opaque, "opaque triangles are committed by proceed, never offered: {c:?}");
+                assert!(
+                    ray.t_min < c.t && c.t < t_max,
+                    "triangle candidate t {} outside ({}, {t_max})",
+                    c.t,
+                    ray.t_min
+                );
+                assert!(
+                    !c.opaque,
+                    "opaque triangles are committed by proceed, never offered: {c:?}"
+                );
             }
             Some(hostas::CandidateType::Aabb) => {
-                assert!(!(c.t < ray.t_min) && !(c.t > t_max), "AABB candidate entry t {} outside [{}, {t_max}]", c.t, ray.t_min);
+                assert!(
+                    !(c.t < ray.t_min) && !(c.t > t_max),
+                    "AABB candidate entry t {} outside [{}, {t_max}]",
+                    c.t,
+                    ray.t_min
+                );
             }
             None => panic!("proceed returned true without a candidate"),
         }
@@ -183,7 +313,11 @@ pub fn walk_query(scene: &Scene, ray: &Ray, mut decide: impl FnMut() -> u8, step
         match d % 8 {
             0 | 1 => {
                 let r = q.confirm_intersection();
-                assert_eq!(r.is_ok(), c.candidate_type() == Some(hostas::CandidateType::Triangle), "confirm on {c:?}: {r:?}");
+                assert_eq!(
+                    r.is_ok(),
+                    c.candidate_type() == Some(hostas::CandidateType::Triangle),
+                    "confirm on {c:?}: {r:?}"
+                );
             }
             2 | 3 => {
                 // Generate at the entry, at a range end, or at an arbitrary (maybe invalid) t.
@@ -196,10 +330,21 @@ pub fn walk_query(scene: &Scene, ray: &Ray, mut decide: impl FnMut() -> u8, step
                     _ => c.t + (decide() as f32 - 128.0) / 64.0,
                 };
                 let r = q.generate_intersection(t);
-                let allowed = c.candidate_type() == Some(hostas::CandidateType::Aabb) && ray.t_min <= t && t <= t_max;
-                assert_eq!(r.is_ok(), allowed, "generate at {t} on {c:?} (range [{}, {t_max}]): {r:?}", ray.t_min);
+                let allowed = c.candidate_type() == Some(hostas::CandidateType::Aabb)
+                    && ray.t_min <= t
+                    && t <= t_max;
+                assert_eq!(
+                    r.is_ok(),
+                    allowed,
+                    "generate at {t} on {c:?} (range [{}, {t_max}]): {r:?}",
+                    ray.t_min
+                );
                 if r.is_err() {
-                    assert_eq!(format!("{:?}", q.committed()), format!("{before:?}"), "a refused generate changed the committed hit");
+                    assert_eq!(
+                        format!("{:?}", q.committed()),
+                        format!("{before:?}"),
+                        "a refused generate changed the committed hit"
+                    );
                 }
             }
             4 => {
@@ -242,7 +387,11 @@ pub fn walk_query(scene: &Scene, ray: &Ray, mut decide: impl FnMut() -> u8, step
 /// Instances of `blas` with a few transforms (identity, rotated and scaled, mirrored).
 pub fn instances_of(blas: AccelerationStructure) -> Vec<hostas::Instance> {
     let mut rot = Affine::IDENTITY;
-    rot.m = [[0.0, -2.0, 0.0, 3.0], [1.0, 0.0, 0.0, -1.0], [0.0, 0.0, 0.5, 0.25]];
+    rot.m = [
+        [0.0, -2.0, 0.0, 3.0],
+        [1.0, 0.0, 0.0, -1.0],
+        [0.0, 0.0, 0.5, 0.25],
+    ];
     let mut mirror = Affine::IDENTITY;
     mirror.m[0][0] = -1.0;
     let mut out = vec![
@@ -250,8 +399,10 @@ pub fn instances_of(blas: AccelerationStructure) -> Vec<hostas::Instance> {
         hostas::quick::instance(blas, rot),
         hostas::quick::instance(blas, mirror),
     ];
-    out[1].flags = vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
-    out[2].flags = vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE;
+    out[1].flags = vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING
+        | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
+    out[2].flags = vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+        | vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE;
     out[2].mask = 0x0f;
     out
 }
@@ -270,7 +421,10 @@ impl Lcg {
         Lcg(h ^ b.len() as u64)
     }
     pub fn byte(&mut self) -> u8 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 56) as u8
     }
 }

@@ -16,7 +16,10 @@ use super::common::*;
 use hostas::commands::SerializedHeader;
 use hostas::commands::copy::SERIALIZED_HEADER_SIZE;
 use hostas::layout::{Header, view};
-use hostas::{AccelerationStructure, AccelerationStructureCreateInfo, Buffer, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, vk};
+use hostas::{
+    AccelerationStructure, AccelerationStructureCreateInfo, Buffer, BuildGeometryInfo,
+    BuildRangeInfo, Device, Geometry, vk,
+};
 
 pub fn run(data: &[u8]) {
     let fx = Fixture::new();
@@ -47,7 +50,8 @@ pub fn run(data: &[u8]) {
 /// `bytes` copied to byte `shift` of a 16-byte aligned allocation.
 fn aligned(bytes: &[u8], shift: usize) -> Vec<u128> {
     let mut words = vec![0u128; (bytes.len() + shift).div_ceil(16)];
-    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[shift..shift + bytes.len()].copy_from_slice(bytes);
+    bytemuck::cast_slice_mut::<u128, u8>(&mut words)[shift..shift + bytes.len()]
+        .copy_from_slice(bytes);
     words
 }
 
@@ -69,29 +73,59 @@ fn into_precreated(fx: &Fixture, data: &[u8], h: &SerializedHeader, lcg: &mut Lc
             _ => 256,
         }
     };
-    let ty = [vk::AccelerationStructureTypeKHR::GENERIC, vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL, vk::AccelerationStructureTypeKHR::TOP_LEVEL][lcg.byte() as usize % 3];
+    let ty = [
+        vk::AccelerationStructureTypeKHR::GENERIC,
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        vk::AccelerationStructureTypeKHR::TOP_LEVEL,
+    ][lcg.byte() as usize % 3];
     // Placed at offset 256 of a buffer with a neighbour before it and a guard band after it.
     let size = size.div_ceil(256) * 256;
-    let Ok(buffer) = Buffer::new(256 + size + 512) else { return };
+    let Ok(buffer) = Buffer::new(256 + size + 512) else {
+        return;
+    };
     let neighbour = d
-        .create_acceleration_structure(&AccelerationStructureCreateInfo { buffer: Some(buffer.clone()), ..AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::GENERIC, 256) })
+        .create_acceleration_structure(&AccelerationStructureCreateInfo {
+            buffer: Some(buffer.clone()),
+            ..AccelerationStructureCreateInfo::new(vk::AccelerationStructureTypeKHR::GENERIC, 256)
+        })
         .expect("neighbour");
     let dst = d
-        .create_acceleration_structure(&AccelerationStructureCreateInfo { buffer: Some(buffer.clone()), offset: 256, ..AccelerationStructureCreateInfo::new(ty, size) })
+        .create_acceleration_structure(&AccelerationStructureCreateInfo {
+            buffer: Some(buffer.clone()),
+            offset: 256,
+            ..AccelerationStructureCreateInfo::new(ty, size)
+        })
         .expect("placed destination");
     let src = aligned(data, 0);
-    let r = d.copy_memory_to_acceleration_structure(&as_bytes(&src)[..data.len()], dst, vk::CopyAccelerationStructureModeKHR::DESERIALIZE);
+    let r = d.copy_memory_to_acceleration_structure(
+        &as_bytes(&src)[..data.len()],
+        dst,
+        vk::CopyAccelerationStructureModeKHR::DESERIALIZE,
+    );
     // A misaligned source address is always refused.
     let mis = aligned(data, 8);
-    let rm = d.copy_memory_to_acceleration_structure(&as_bytes(&mis)[8..8 + data.len()], neighbour, vk::CopyAccelerationStructureModeKHR::DESERIALIZE);
-    assert!(rm.is_err(), "deserialization from a misaligned address was accepted");
+    let rm = d.copy_memory_to_acceleration_structure(
+        &as_bytes(&mis)[8..8 + data.len()],
+        neighbour,
+        vk::CopyAccelerationStructureModeKHR::DESERIALIZE,
+    );
+    assert!(
+        rm.is_err(),
+        "deserialization from a misaligned address was accepted"
+    );
     // Nothing outside the destination was written.
     let mut around = vec![0u8; 256];
     buffer.read(0, &mut around).expect("read neighbour");
-    assert!(around.iter().all(|&b| b == 0), "deserialization wrote into the neighbouring structure");
+    assert!(
+        around.iter().all(|&b| b == 0),
+        "deserialization wrote into the neighbouring structure"
+    );
     let mut after = vec![0u8; 512];
     buffer.read(256 + size, &mut after).expect("read guard");
-    assert!(after.iter().all(|&b| b == 0), "deserialization wrote past the destination");
+    assert!(
+        after.iter().all(|&b| b == 0),
+        "deserialization wrote past the destination"
+    );
     if r.is_ok() {
         exercise(fx, dst, lcg);
     }
@@ -123,7 +157,9 @@ fn exercise_with(fx: &Fixture, a: AccelerationStructure, lcg: &mut Lcg, trusted:
         }
     };
     let Some(bytes) = bytes_of(d, a) else { return };
-    let Ok(header) = view::read_header(&bytes) else { panic!("statistics but no header") };
+    let Ok(header) = view::read_header(&bytes) else {
+        panic!("statistics but no header")
+    };
     for q in [
         vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR,
         vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
@@ -132,32 +168,53 @@ fn exercise_with(fx: &Fixture, a: AccelerationStructure, lcg: &mut Lcg, trusted:
     ] {
         let _ = d.acceleration_structure_property(a, q);
     }
-    assert_eq!(d.acceleration_structure_property(a, vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR).ok(), Some(stats.used_bytes));
+    assert_eq!(
+        d.acceleration_structure_property(a, vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR)
+            .ok(),
+        Some(stats.used_bytes)
+    );
 
     // Serialize round trip: serialize's output is accepted, and is a fixed point after one round.
     let mut created = Vec::new();
     let s1 = Some(d.serialize(a).expect("serialize a structure that parses"));
     if let Some(s1) = &s1 {
-        let d1 = d.deserialize(s1).expect("the output of serialize deserializes");
+        let d1 = d
+            .deserialize(s1)
+            .expect("the output of serialize deserializes");
         let s2 = d.serialize(d1).expect("serialize again");
         let d2 = d.deserialize(&s2).expect("deserialize again");
         let s3 = d.serialize(d2).expect("serialize a third time");
-        assert!(s2 == s3, "serialize(deserialize(s)) != s for s = serialize(deserialize(serialize(x)))");
+        assert!(
+            s2 == s3,
+            "serialize(deserialize(s)) != s for s = serialize(deserialize(serialize(x)))"
+        );
         created.extend([d1, d2]);
     }
 
     // Clone and compact into exactly sized destinations.
-    if let Ok(c) = create(d, vk::AccelerationStructureTypeKHR::GENERIC, stats.used_bytes) {
+    if let Ok(c) = create(
+        d,
+        vk::AccelerationStructureTypeKHR::GENERIC,
+        stats.used_bytes,
+    ) {
         let r = d.copy_acceleration_structure(a, c, vk::CopyAccelerationStructureModeKHR::CLONE);
         if stats.used_bytes <= MAX_ALLOC {
             r.expect("clone into an exactly sized destination");
-            assert_eq!(d.statistics(c).ok().map(|s| s.used_bytes), Some(stats.used_bytes));
+            assert_eq!(
+                d.statistics(c).ok().map(|s| s.used_bytes),
+                Some(stats.used_bytes)
+            );
         }
         created.push(c);
     }
     if stats.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw() != 0 {
-        if let Ok(c) = create(d, vk::AccelerationStructureTypeKHR::GENERIC, stats.used_bytes) {
-            let r = d.copy_acceleration_structure(a, c, vk::CopyAccelerationStructureModeKHR::COMPACT);
+        if let Ok(c) = create(
+            d,
+            vk::AccelerationStructureTypeKHR::GENERIC,
+            stats.used_bytes,
+        ) {
+            let r =
+                d.copy_acceleration_structure(a, c, vk::CopyAccelerationStructureModeKHR::COMPACT);
             if stats.used_bytes <= MAX_ALLOC {
                 r.expect("compact into an exactly sized destination");
             }
@@ -179,8 +236,17 @@ fn exercise_with(fx: &Fixture, a: AccelerationStructure, lcg: &mut Lcg, trusted:
         // The same TLAS with its handles pointed at real bottom-level structures.
         if let Some(s1) = &s1 {
             let mut s = s1.clone();
-            let n = SerializedHeader::parse(&s).map(|h| h.handles.len()).unwrap_or(0);
-            let targets = [fx.tri_blas.raw(), fx.aabb_blas.raw(), 0, fx.tlas.raw(), fx.unbuilt.raw(), fx.destroyed];
+            let n = SerializedHeader::parse(&s)
+                .map(|h| h.handles.len())
+                .unwrap_or(0);
+            let targets = [
+                fx.tri_blas.raw(),
+                fx.aabb_blas.raw(),
+                0,
+                fx.tlas.raw(),
+                fx.unbuilt.raw(),
+                fx.destroyed,
+            ];
             for i in 0..n {
                 let t = targets[(lcg.byte() as usize % 3 + i) % targets.len()];
                 s[56 + 8 * i..64 + 8 * i].copy_from_slice(&t.to_le_bytes());
@@ -199,8 +265,15 @@ fn exercise_with(fx: &Fixture, a: AccelerationStructure, lcg: &mut Lcg, trusted:
         }
     } else {
         let mut instances = instances_of(a);
-        instances.push(hostas::quick::instance(fx.tri_blas, hostas::Affine::IDENTITY));
-        match hostas::quick::build_tlas(d, &instances, vk::BuildAccelerationStructureFlagsKHR::empty()) {
+        instances.push(hostas::quick::instance(
+            fx.tri_blas,
+            hostas::Affine::IDENTITY,
+        ));
+        match hostas::quick::build_tlas(
+            d,
+            &instances,
+            vk::BuildAccelerationStructureFlagsKHR::empty(),
+        ) {
             Ok(t) => {
                 if let Ok(scene) = d.scene(t) {
                     trace_rays(&scene, &rays, false);
@@ -239,7 +312,11 @@ pub fn records(h: &Header, bytes: &[u8]) -> Option<Vec<Record>> {
     (0..h.geometry_count as u64)
         .map(|g| {
             let at = usize::try_from(h.geometries_offset.checked_add(48 * g)?).ok()?;
-            let w = |k: usize| -> Option<u32> { Some(u32::from_le_bytes(bytes.get(at + 4 * k..at + 4 * k + 4)?.try_into().ok()?)) };
+            let w = |k: usize| -> Option<u32> {
+                Some(u32::from_le_bytes(
+                    bytes.get(at + 4 * k..at + 4 * k + 4)?.try_into().ok()?,
+                ))
+            };
             Some(Record {
                 first_primitive: w(0)?,
                 primitive_count: w(1)?,
@@ -257,9 +334,18 @@ pub fn records(h: &Header, bytes: &[u8]) -> Option<Vec<Record>> {
 
 /// An update of `a` whose inputs match its geometry records (types, formats, counts, flags,
 /// transform presence), with new data: what an application updating the structure passes.
-fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes: &[u8], lcg: &mut Lcg, created: &mut Vec<AccelerationStructure>) {
+fn update_from_records(
+    fx: &Fixture,
+    a: AccelerationStructure,
+    h: &Header,
+    bytes: &[u8],
+    lcg: &mut Lcg,
+    created: &mut Vec<AccelerationStructure>,
+) {
     let d = &fx.device;
-    let Some(recs) = records(h, bytes) else { return };
+    let Some(recs) = records(h, bytes) else {
+        return;
+    };
     if recs.len() > 64 {
         return;
     }
@@ -274,7 +360,8 @@ fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes
     for r in &recs {
         let prims = (r.primitive_count as u64).min(CAP) as usize;
         let format = vk::Format::from_raw(r.vertex_format as i32);
-        let vsize = hostas::input::vertex_format::vertex_format_info(format).map_or(12, |i| i.size as usize);
+        let vsize = hostas::input::vertex_format::vertex_format_info(format)
+            .map_or(12, |i| i.size as usize);
         let nverts = (r.max_vertex as u64 + 1).min(3 * CAP) as usize;
         let mut vertices = vec![0u8; nverts * vsize];
         for (i, v) in vertices.chunks_mut(4).enumerate() {
@@ -292,7 +379,9 @@ fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes
             vk::IndexType::NONE_KHR => 0,
             _ => 4,
         };
-        let span = (r.max_vertex as u64 + 1).saturating_sub(r.first_vertex as u64).max(1);
+        let span = (r.max_vertex as u64 + 1)
+            .saturating_sub(r.first_vertex as u64)
+            .max(1);
         let mut indices = Vec::new();
         for _ in 0..3 * prims {
             let i = (lcg.byte() as u64 | (lcg.byte() as u64) << 8) % span;
@@ -302,7 +391,12 @@ fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes
                 indices.extend_from_slice(&(i as u32).to_le_bytes());
             }
         }
-        let transform: Vec<u8> = [1.0f32, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, -0.5].iter().flat_map(|f| f.to_le_bytes()).collect();
+        let transform: Vec<u8> = [
+            1.0f32, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, -0.5,
+        ]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
         let mut boxes = Vec::new();
         for i in 0..prims {
             let c = (lcg.byte() as i8) as f32 / 8.0 + i as f32 * 0.001;
@@ -310,7 +404,12 @@ fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes
                 boxes.extend_from_slice(&v.to_le_bytes());
             }
         }
-        owned.push(Owned { vertices, indices, transform, boxes });
+        owned.push(Owned {
+            vertices,
+            indices,
+            transform,
+            boxes,
+        });
     }
     let geoms: Vec<Geometry> = recs
         .iter()
@@ -323,26 +422,52 @@ fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes
                     hostas::TrianglesData {
                         vertex_format: vk::Format::from_raw(r.vertex_format as i32),
                         vertex_data: &o.vertices,
-                        vertex_stride: hostas::input::vertex_format::vertex_format_info(vk::Format::from_raw(r.vertex_format as i32)).map_or(12, |i| i.size as u64),
+                        vertex_stride: hostas::input::vertex_format::vertex_format_info(
+                            vk::Format::from_raw(r.vertex_format as i32),
+                        )
+                        .map_or(12, |i| i.size as u64),
                         max_vertex: r.max_vertex,
                         index_type,
-                        index_data: if index_type == vk::IndexType::NONE_KHR { None } else { Some(&o.indices) },
-                        transform_data: if r.extra & 1 != 0 { Some(&o.transform) } else { None },
+                        index_data: if index_type == vk::IndexType::NONE_KHR {
+                            None
+                        } else {
+                            Some(&o.indices)
+                        },
+                        transform_data: if r.extra & 1 != 0 {
+                            Some(&o.transform)
+                        } else {
+                            None
+                        },
                     },
                     flags,
                 )
             } else {
-                Geometry::aabbs(hostas::AabbsData { data: &o.boxes, stride: 24 }, flags)
+                Geometry::aabbs(
+                    hostas::AabbsData {
+                        data: &o.boxes,
+                        stride: 24,
+                    },
+                    flags,
+                )
             }
         })
         .collect();
     let ranges: Vec<BuildRangeInfo> = recs
         .iter()
-        .map(|r| BuildRangeInfo { primitive_count: r.primitive_count, first_vertex: r.first_vertex, primitive_offset: 0, transform_offset: 0 })
+        .map(|r| BuildRangeInfo {
+            primitive_count: r.primitive_count,
+            first_vertex: r.first_vertex,
+            primitive_offset: 0,
+            transform_offset: 0,
+        })
         .collect();
     let flags = vk::BuildAccelerationStructureFlagsKHR::from_raw(h.build_flags);
     // In place, or into a new destination of the source's size.
-    let dst = if lcg.byte() % 2 == 0 { Some(a) } else { create(d, vk::AccelerationStructureTypeKHR::GENERIC, h.used_size).ok() };
+    let dst = if lcg.byte() % 2 == 0 {
+        Some(a)
+    } else {
+        create(d, vk::AccelerationStructureTypeKHR::GENERIC, h.used_size).ok()
+    };
     let Some(dst) = dst else { return };
     if dst != a {
         created.push(dst);
@@ -357,12 +482,22 @@ fn update_from_records(fx: &Fixture, a: AccelerationStructure, h: &Header, bytes
         geometries: &geoms,
         scratch: Some(&mut scratch),
     };
-    if d.build_acceleration_structures(&mut [info], &[&ranges]).is_ok() {
+    if d.build_acceleration_structures(&mut [info], &[&ranges])
+        .is_ok()
+    {
         // An update that succeeded leaves a structure that parses and can be traced.
         let st = d.statistics(dst);
-        assert!(st.is_ok(), "the updated structure no longer parses: {:?}", st.err());
+        assert!(
+            st.is_ok(),
+            "the updated structure no longer parses: {:?}",
+            st.err()
+        );
         let instances = instances_of(dst);
-        if let Ok(t) = hostas::quick::build_tlas(d, &instances, vk::BuildAccelerationStructureFlagsKHR::empty()) {
+        if let Ok(t) = hostas::quick::build_tlas(
+            d,
+            &instances,
+            vk::BuildAccelerationStructureFlagsKHR::empty(),
+        ) {
             if let Ok(scene) = d.scene(t) {
                 trace_rays(&scene, &probe_rays([-2.0; 3], [2.0; 3]), false);
             }
@@ -378,7 +513,9 @@ fn scribble(fx: &Fixture, payload: &[u8], lcg: &mut Lcg) {
         return;
     }
     let size = (payload.len() as u64).max(256).div_ceil(256) * 256;
-    let Ok(a) = create(d, vk::AccelerationStructureTypeKHR::GENERIC, size) else { return };
+    let Ok(a) = create(d, vk::AccelerationStructureTypeKHR::GENERIC, size) else {
+        return;
+    };
     let (buffer, offset, _) = d.placement(a).expect("placement");
     buffer.write(offset, payload).expect("write payload");
     exercise_with(fx, a, lcg, false);

@@ -16,7 +16,11 @@ pub mod source;
 pub type Target = fn(&[u8]);
 
 /// The targets by name, as the corpus directories are named.
-pub const TARGETS: [(&str, Target); 3] = [("deserialize", deserialize::run), ("build_inputs", build_inputs::run), ("ray_query", ray_query::run)];
+pub const TARGETS: [(&str, Target); 3] = [
+    ("deserialize", deserialize::run),
+    ("build_inputs", build_inputs::run),
+    ("ray_query", ray_query::run),
+];
 
 pub fn target(name: &str) -> Option<Target> {
     TARGETS.iter().find(|(n, _)| *n == name).map(|(_, f)| *f)

@@ -43,7 +43,11 @@ impl<'a> Source<'a> {
     /// A value in `0..n` (`n > 0`), from one byte when `n <= 256`.
     pub fn below(&mut self, n: u32) -> u32 {
         debug_assert!(n > 0);
-        if n <= 256 { self.u8() as u32 % n } else { self.u32() % n }
+        if n <= 256 {
+            self.u8() as u32 % n
+        } else {
+            self.u32() % n
+        }
     }
 
     /// `true` with probability about `num / 256`.

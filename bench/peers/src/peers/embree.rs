@@ -65,8 +65,18 @@ struct Device {
     mem: Box<AtomicI64>,
 }
 
-unsafe extern "C" fn on_error(_user: *mut c_void, code: RTCError, msg: *const std::os::raw::c_char) {
-    let m = if msg.is_null() { String::new() } else { unsafe { CStr::from_ptr(msg) }.to_string_lossy().into_owned() };
+unsafe extern "C" fn on_error(
+    _user: *mut c_void,
+    code: RTCError,
+    msg: *const std::os::raw::c_char,
+) {
+    let m = if msg.is_null() {
+        String::new()
+    } else {
+        unsafe { CStr::from_ptr(msg) }
+            .to_string_lossy()
+            .into_owned()
+    };
     eprintln!("embree error {code:?}: {m}");
 }
 
@@ -83,7 +93,11 @@ impl Device {
         let mem = Box::new(AtomicI64::new(0));
         unsafe {
             rtcSetDeviceErrorFunction(dev, Some(on_error), std::ptr::null_mut());
-            rtcSetDeviceMemoryMonitorFunction(dev, Some(on_memory), &*mem as *const AtomicI64 as *mut c_void);
+            rtcSetDeviceMemoryMonitorFunction(
+                dev,
+                Some(on_memory),
+                &*mem as *const AtomicI64 as *mut c_void,
+            );
         }
         Device { dev, mem }
     }
@@ -149,7 +163,11 @@ fn new_scene(
 }
 
 fn trace(scene: RTCScene, rays: &[Ray], hits: &mut [Hit]) {
-    let mut ctx = RTCIntersectContext { flags: RTCIntersectContextFlags::INCOHERENT, filter: None, instID: [INVALID_ID] };
+    let mut ctx = RTCIntersectContext {
+        flags: RTCIntersectContextFlags::INCOHERENT,
+        filter: None,
+        instID: [INVALID_ID],
+    };
     for (r, h) in rays.iter().zip(hits.iter_mut()) {
         let mut rh = RTCRayHit {
             ray: RTCRay {
@@ -178,7 +196,14 @@ fn trace(scene: RTCScene, rays: &[Ray], hits: &mut [Hit]) {
             },
         };
         unsafe { rtcIntersect1(scene, &mut ctx, &mut rh) };
-        *h = if rh.hit.geomID != INVALID_ID { Hit { t: rh.ray.tfar, prim: rh.hit.primID } } else { Hit::MISS };
+        *h = if rh.hit.geomID != INVALID_ID {
+            Hit {
+                t: rh.ray.tfar,
+                prim: rh.hit.primID,
+            }
+        } else {
+            Hit::MISS
+        };
     }
 }
 
@@ -189,7 +214,10 @@ fn verts4(p: &[[f32; 3]]) -> Vec<[f32; 4]> {
 }
 
 pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
-    let variants: Vec<&Variant> = VARIANTS.iter().filter(|v| cfg.wants("embree", v.key)).collect();
+    let variants: Vec<&Variant> = VARIANTS
+        .iter()
+        .filter(|v| cfg.wants("embree", v.key))
+        .collect();
     let do_refit = cfg.refit && cfg.wants("embree", "refit");
     if variants.is_empty() && !do_refit {
         return Vec::new();
@@ -200,11 +228,17 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         .iter()
         .map(|v| {
             let mut r = Row::new("embree", v.key, v.desc, Some(v.class));
-            r.bytes_note = "memory monitor: BVH8 nodes + Triangle4 leaves (allocator blocks)".into();
+            r.bytes_note =
+                "memory monitor: BVH8 nodes + Triangle4 leaves (allocator blocks)".into();
             r
         })
         .collect();
-    let mut refit_row = Row::new("embree", "refit", "refit: scene LOW+DYNAMIC, geometry REFIT", Some(Class::Default));
+    let mut refit_row = Row::new(
+        "embree",
+        "refit",
+        "refit: scene LOW+DYNAMIC, geometry REFIT",
+        Some(Class::Default),
+    );
 
     for &t in &cfg.threads {
         let d = Device::new(t);
@@ -245,8 +279,14 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         if do_refit {
             let mut buf = verts.clone();
             let moved = verts4(&crate::scene::deformed(scene));
-            let (s, g) =
-                new_scene(&d, &buf, idx, RTCBuildQuality::LOW, RTCBuildQuality::REFIT, RTCSceneFlags::DYNAMIC);
+            let (s, g) = new_scene(
+                &d,
+                &buf,
+                idx,
+                RTCBuildQuality::LOW,
+                RTCBuildQuality::REFIT,
+                RTCSceneFlags::DYNAMIC,
+            );
             unsafe { rtcCommitScene(s) };
             let mut flip = false;
             let ms = median_ms(cfg.warmup, cfg.reps, || {
@@ -272,7 +312,14 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
                 let rs = &rays.incoherent;
                 let mut a = vec![Hit::MISS; rs.len()];
                 trace(s, rs, &mut a);
-                let (s2, g2) = new_scene(&d, &moved, idx, RTCBuildQuality::MEDIUM, RTCBuildQuality::MEDIUM, RTCSceneFlags::NONE);
+                let (s2, g2) = new_scene(
+                    &d,
+                    &moved,
+                    idx,
+                    RTCBuildQuality::MEDIUM,
+                    RTCBuildQuality::MEDIUM,
+                    RTCSceneFlags::NONE,
+                );
                 unsafe { rtcCommitScene(s2) };
                 let mut b = vec![Hit::MISS; rs.len()];
                 trace(s2, rs, &mut b);
@@ -309,7 +356,11 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             }
             let (s, dt) = time(|| sah_proxy(&d, scene, v.quality));
             row.sah = Some(s);
-            row.sah_note = format!("proxy: rtcBuildBVH {} width 2, leaves <= 8 ({:.0} ms)", v.key, dt.as_secs_f64() * 1e3);
+            row.sah_note = format!(
+                "proxy: rtcBuildBVH {} width 2, leaves <= 8 ({:.0} ms)",
+                v.key,
+                dt.as_secs_f64() * 1e3
+            );
         }
     }
     if do_refit {
@@ -340,11 +391,20 @@ unsafe fn alloc_node(a: RTCThreadLocalAllocator) -> *mut BNode {
     p
 }
 
-unsafe extern "C" fn create_node(a: RTCThreadLocalAllocator, _n: u32, _u: *mut c_void) -> *mut c_void {
+unsafe extern "C" fn create_node(
+    a: RTCThreadLocalAllocator,
+    _n: u32,
+    _u: *mut c_void,
+) -> *mut c_void {
     unsafe { alloc_node(a) as *mut c_void }
 }
 
-unsafe extern "C" fn set_children(node: *mut c_void, ch: *mut *mut c_void, n: u32, _u: *mut c_void) {
+unsafe extern "C" fn set_children(
+    node: *mut c_void,
+    ch: *mut *mut c_void,
+    n: u32,
+    _u: *mut c_void,
+) {
     let node = unsafe { &mut *(node as *mut BNode) };
     node.child_count = n.min(2);
     for i in 0..node.child_count as usize {
@@ -352,7 +412,12 @@ unsafe extern "C" fn set_children(node: *mut c_void, ch: *mut *mut c_void, n: u3
     }
 }
 
-unsafe extern "C" fn set_bounds(node: *mut c_void, b: *mut *const RTCBounds, n: u32, _u: *mut c_void) {
+unsafe extern "C" fn set_bounds(
+    node: *mut c_void,
+    b: *mut *const RTCBounds,
+    n: u32,
+    _u: *mut c_void,
+) {
     let node = unsafe { &mut *(node as *mut BNode) };
     for i in 0..(n.min(2) as usize) {
         node.bounds[i] = unsafe { **b.add(i) };
@@ -421,7 +486,16 @@ unsafe extern "C" fn split_prim(
         } else {
             lo[dim] = lo[dim].max(pos);
         }
-        RTCBounds { lower_x: lo[0], lower_y: lo[1], lower_z: lo[2], align0: 0.0, upper_x: hi[0], upper_y: hi[1], upper_z: hi[2], align1: 0.0 }
+        RTCBounds {
+            lower_x: lo[0],
+            lower_y: lo[1],
+            lower_z: lo[2],
+            align0: 0.0,
+            upper_x: hi[0],
+            upper_y: hi[1],
+            upper_z: hi[2],
+            align1: 0.0,
+        }
     };
     unsafe {
         *left = clip(lb, true);
@@ -431,7 +505,11 @@ unsafe extern "C" fn split_prim(
 
 fn sah_proxy(d: &Device, scene: &Scene, quality: RTCBuildQuality) -> f64 {
     let n = scene.tri_count();
-    let cap = if quality == RTCBuildQuality::HIGH { 2 * n } else { n };
+    let cap = if quality == RTCBuildQuality::HIGH {
+        2 * n
+    } else {
+        n
+    };
     let mut prims: Vec<RTCBuildPrimitive> = Vec::with_capacity(cap);
     for (i, t) in scene.indices.iter().enumerate() {
         let v = t.map(|k| scene.positions[k as usize]);
@@ -448,7 +526,10 @@ fn sah_proxy(d: &Device, scene: &Scene, quality: RTCBuildQuality) -> f64 {
             primID: i as u32,
         });
     }
-    let ctx = SplitCtx { pos: &scene.positions, idx: &scene.indices };
+    let ctx = SplitCtx {
+        pos: &scene.positions,
+        idx: &scene.indices,
+    };
     unsafe {
         prims.set_len(n);
         let bvh = rtcNewBVH(d.dev);
@@ -489,7 +570,10 @@ fn sah_proxy(d: &Device, scene: &Scene, quality: RTCBuildQuality) -> f64 {
                 sum += sah::C_TRAV * a;
                 for i in 0..node.child_count as usize {
                     let b = node.bounds[i];
-                    let ca = sah::area([b.lower_x, b.lower_y, b.lower_z], [b.upper_x, b.upper_y, b.upper_z]);
+                    let ca = sah::area(
+                        [b.lower_x, b.lower_y, b.lower_z],
+                        [b.upper_x, b.upper_y, b.upper_z],
+                    );
                     stack.push((node.children[i], ca));
                 }
             }

@@ -20,7 +20,9 @@ use crate::rays::{Hit, Ray, RaySet};
 use crate::report::{Class, Row};
 use crate::scene::Scene;
 use crate::util::{median_ms, pool, time};
-use hostas::{AccelerationStructure, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, TrianglesData, vk};
+use hostas::{
+    AccelerationStructure, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, TrianglesData, vk,
+};
 use serde_json::json;
 
 type Flags = vk::BuildAccelerationStructureFlagsKHR;
@@ -33,19 +35,52 @@ pub struct Preset {
 }
 
 pub const PRESETS: [Preset; 4] = [
-    Preset { key: "fast_build", desc: "PREFER_FAST_BUILD", class: Class::FastBuild, flags: || Flags::PREFER_FAST_BUILD },
-    Preset { key: "default", desc: "default (no preference flag)", class: Class::Default, flags: Flags::empty },
-    Preset { key: "fast_trace", desc: "PREFER_FAST_TRACE", class: Class::FastTrace, flags: || Flags::PREFER_FAST_TRACE },
-    Preset { key: "low_memory", desc: "LOW_MEMORY", class: Class::LowMemory, flags: || Flags::LOW_MEMORY },
+    Preset {
+        key: "fast_build",
+        desc: "PREFER_FAST_BUILD",
+        class: Class::FastBuild,
+        flags: || Flags::PREFER_FAST_BUILD,
+    },
+    Preset {
+        key: "default",
+        desc: "default (no preference flag)",
+        class: Class::Default,
+        flags: Flags::empty,
+    },
+    Preset {
+        key: "fast_trace",
+        desc: "PREFER_FAST_TRACE",
+        class: Class::FastTrace,
+        flags: || Flags::PREFER_FAST_TRACE,
+    },
+    Preset {
+        key: "low_memory",
+        desc: "LOW_MEMORY",
+        class: Class::LowMemory,
+        flags: || Flags::LOW_MEMORY,
+    },
 ];
 
-fn build(device: &Device, pos: &[[f32; 3]], idx: &[[u32; 3]], flags: Flags) -> Result<AccelerationStructure, String> {
-    hostas::quick::build_triangle_blas(device, pos, idx, flags).map_err(|e| format!("build failed: {e}"))
+fn build(
+    device: &Device,
+    pos: &[[f32; 3]],
+    idx: &[[u32; 3]],
+    flags: Flags,
+) -> Result<AccelerationStructure, String> {
+    hostas::quick::build_triangle_blas(device, pos, idx, flags)
+        .map_err(|e| format!("build failed: {e}"))
 }
 
 /// Traces through a single-instance TLAS over `blas`.
-fn trace_blas(device: &Device, blas: AccelerationStructure, rays: &RaySet, passes: usize, row: &mut Row) -> Result<(), String> {
-    let tlas = hostas::quick::build_single_instance_tlas(device, blas).map_err(|e| format!("TLAS build failed: {e}"))?;
+fn trace_blas(
+    device: &Device,
+    blas: AccelerationStructure,
+    rays: &RaySet,
+    passes: usize,
+    row: &mut Row,
+) -> Result<(), String> {
+    let tlas = hostas::quick::build_single_instance_tlas(device, blas)
+        .map_err(|e| format!("TLAS build failed: {e}"))?;
     {
         let scene = device.scene(tlas).map_err(|e| format!("scene: {e}"))?;
         trace_all(row, rays, passes, |rs, hits| trace(&scene, rs, hits));
@@ -58,12 +93,27 @@ fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
     // A Tracer reuses its views and stack across rays (the batch path of hostas).
     let mut tracer = scene.tracer();
     for (r, h) in rays.iter().zip(hits.iter_mut()) {
-        let hit = tracer.closest(&hostas::Ray::new(r.o, r.d)).expect("trace_closest");
-        *h = if hit.is_hit() { Hit { t: hit.t, prim: hit.primitive_index } } else { Hit::MISS };
+        let hit = tracer
+            .closest(&hostas::Ray::new(r.o, r.d))
+            .expect("trace_closest");
+        *h = if hit.is_hit() {
+            Hit {
+                t: hit.t,
+                prim: hit.primitive_index,
+            }
+        } else {
+            Hit::MISS
+        };
     }
 }
 
-fn run_preset(scene: &Scene, rays: &RaySet, cfg: &Cfg, device: &Device, p: &Preset) -> Result<Row, String> {
+fn run_preset(
+    scene: &Scene,
+    rays: &RaySet,
+    cfg: &Cfg,
+    device: &Device,
+    p: &Preset,
+) -> Result<Row, String> {
     let mut row = Row::new("hostas", p.key, p.desc, Some(p.class));
     row.sah_wide = true;
     row.sah_note = "reported by hostas: its 8-wide tree (node visit 1, primitive test 1)".into();
@@ -96,7 +146,9 @@ fn run_preset(scene: &Scene, rays: &RaySet, cfg: &Cfg, device: &Device, p: &Pres
         row.build_ms.insert(t, ms);
     }
     let blas = kept.ok_or("no 1-thread build kept")?;
-    let st = device.statistics(blas).map_err(|e| format!("statistics: {e}"))?;
+    let st = device
+        .statistics(blas)
+        .map_err(|e| format!("statistics: {e}"))?;
     row.sah = Some(st.sah_cost as f64);
     row.bytes = Some(st.used_bytes);
     row.extra.insert(
@@ -129,9 +181,19 @@ fn triangles<'a>(pos: &'a [[f32; 3]], idx: &'a [[u32; 3]]) -> [Geometry<'a>; 1] 
     )]
 }
 
-fn update(device: &Device, blas: AccelerationStructure, flags: Flags, pos: &[[f32; 3]], idx: &[[u32; 3]], scratch: &mut [u8]) -> Result<(), String> {
+fn update(
+    device: &Device,
+    blas: AccelerationStructure,
+    flags: Flags,
+    pos: &[[f32; 3]],
+    idx: &[[u32; 3]],
+    scratch: &mut [u8],
+) -> Result<(), String> {
     let g = triangles(pos, idx);
-    let range = [BuildRangeInfo { primitive_count: idx.len() as u32, ..Default::default() }];
+    let range = [BuildRangeInfo {
+        primitive_count: idx.len() as u32,
+        ..Default::default()
+    }];
     let info = BuildGeometryInfo {
         ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
         flags,
@@ -141,10 +203,19 @@ fn update(device: &Device, blas: AccelerationStructure, flags: Flags, pos: &[[f3
         geometries: &g,
         scratch: Some(scratch),
     };
-    device.build_acceleration_structures(&mut [info], &[&range]).map_err(|e| format!("update failed: {e}"))
+    device
+        .build_acceleration_structures(&mut [info], &[&range])
+        .map_err(|e| format!("update failed: {e}"))
 }
 
-fn refit(scene: &Scene, rays: &RaySet, cfg: &Cfg, device: &Device, flags: Flags, row: &mut Row) -> Result<(), String> {
+fn refit(
+    scene: &Scene,
+    rays: &RaySet,
+    cfg: &Cfg,
+    device: &Device,
+    flags: Flags,
+    row: &mut Row,
+) -> Result<(), String> {
     let flags = flags | Flags::ALLOW_UPDATE;
     let (orig, idx) = (&scene.positions, &scene.indices);
     let moved = crate::scene::deformed(scene);
@@ -160,7 +231,11 @@ fn refit(scene: &Scene, rays: &RaySet, cfg: &Cfg, device: &Device, flags: Flags,
         scratch: None,
     };
     let sizes = device
-        .build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &[idx.len() as u32])
+        .build_sizes(
+            vk::AccelerationStructureBuildTypeKHR::HOST,
+            &probe,
+            &[idx.len() as u32],
+        )
         .map_err(|e| format!("build_sizes: {e}"))?;
     let mut scratch = vec![0u8; sizes.update_scratch_size.max(1) as usize];
     for &t in &cfg.threads {
@@ -188,20 +263,36 @@ fn refit(scene: &Scene, rays: &RaySet, cfg: &Cfg, device: &Device, flags: Flags,
         let fresh = build(device, &moved, idx, flags)?;
         let mut a = Row::default();
         let mut b = Row::default();
-        let one = RaySet { primary: Vec::new(), incoherent: rays.incoherent.clone() };
+        let one = RaySet {
+            primary: Vec::new(),
+            incoherent: rays.incoherent.clone(),
+        };
         trace_blas(device, blas, &one, 1, &mut a)?;
         trace_blas(device, fresh, &one, 1, &mut b)?;
         let _ = device.destroy_acceleration_structure(fresh);
-        let (ha, hb) = (a.hits[1].take().unwrap_or_default(), b.hits[1].take().unwrap_or_default());
+        let (ha, hb) = (
+            a.hits[1].take().unwrap_or_default(),
+            b.hits[1].take().unwrap_or_default(),
+        );
         let c = crate::report::compare(&hb, &ha, scene.diagonal());
-        row.extra.insert("refit_check".into(), json!({"rays": c.rays, "ties": c.ties, "true_mismatch": c.true_mismatch}));
+        row.extra.insert(
+            "refit_check".into(),
+            json!({"rays": c.rays, "ties": c.ties, "true_mismatch": c.true_mismatch}),
+        );
         if c.true_mismatch > 0 {
-            row.note = format!("after update to moved vertices, {} of {} incoherent rays differ from a fresh build", c.true_mismatch, c.rays);
+            row.note = format!(
+                "after update to moved vertices, {} of {} incoherent rays differ from a fresh build",
+                c.true_mismatch, c.rays
+            );
         }
     }
     let _ = device.destroy_acceleration_structure(blas);
     let extra = "refit = update (mode UPDATE, in place) of a default + ALLOW_UPDATE build";
-    row.note = if row.note.is_empty() { extra.to_string() } else { format!("{extra}; {}", row.note) };
+    row.note = if row.note.is_empty() {
+        extra.to_string()
+    } else {
+        format!("{extra}; {}", row.note)
+    };
     Ok(())
 }
 

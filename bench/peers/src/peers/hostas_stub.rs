@@ -20,7 +20,9 @@ pub fn run(_scene: &Scene, _rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         .filter(|p| cfg.wants("hostas", p.0))
         .map(|p| {
             let mut r = Row::new("hostas", p.0, p.1, Some(p.2));
-            r.error = Some("built without the `hostas` feature (PEERS_FEATURES did not include it)".into());
+            r.error = Some(
+                "built without the `hostas` feature (PEERS_FEATURES did not include it)".into(),
+            );
             r
         })
         .collect()

@@ -14,7 +14,11 @@ use std::time::Instant;
 
 /// One untimed pass that records the hits (and warms caches), then `passes` timed passes;
 /// returns the median ms of a pass and the hits.
-pub fn trace_kind(passes: usize, rays: &[Ray], mut f: impl FnMut(&[Ray], &mut [Hit])) -> (f64, Vec<Hit>) {
+pub fn trace_kind(
+    passes: usize,
+    rays: &[Ray],
+    mut f: impl FnMut(&[Ray], &mut [Hit]),
+) -> (f64, Vec<Hit>) {
     let mut hits = vec![Hit::MISS; rays.len()];
     f(rays, &mut hits);
     let mut scratch = vec![Hit::MISS; rays.len()];
@@ -29,7 +33,12 @@ pub fn trace_kind(passes: usize, rays: &[Ray], mut f: impl FnMut(&[Ray], &mut [H
 }
 
 /// Traces both ray kinds into `row`.
-pub fn trace_all(row: &mut Row, rays: &RaySet, passes: usize, mut f: impl FnMut(&[Ray], &mut [Hit])) {
+pub fn trace_all(
+    row: &mut Row,
+    rays: &RaySet,
+    passes: usize,
+    mut f: impl FnMut(&[Ray], &mut [Hit]),
+) {
     for kind in Kind::ALL {
         let (ms, hits) = trace_kind(passes, rays.get(kind), &mut f);
         row.set_trace(kind, ms, hits);

@@ -55,8 +55,13 @@ fn trace(bvh: &CwBvh, tris: &[Triangle], rays: &[Ray], hits: &mut [Hit]) {
     for (r, h) in rays.iter().zip(hits.iter_mut()) {
         let ray = ORay::new_inf(Vec3A::from(r.o), Vec3A::from(r.d));
         let mut hit = RayHit::none();
-        *h = if bvh.ray_traverse(ray, &mut hit, |ray, id| tris[bvh.primitive_indices[id] as usize].intersect(ray)) {
-            Hit { t: hit.t, prim: bvh.primitive_indices[hit.primitive_id as usize] }
+        *h = if bvh.ray_traverse(ray, &mut hit, |ray, id| {
+            tris[bvh.primitive_indices[id] as usize].intersect(ray)
+        }) {
+            Hit {
+                t: hit.t,
+                prim: bvh.primitive_indices[hit.primitive_id as usize],
+            }
         } else {
             Hit::MISS
         };
@@ -64,7 +69,10 @@ fn trace(bvh: &CwBvh, tris: &[Triangle], rays: &[Ray], hits: &mut [Hit]) {
 }
 
 pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
-    let variants: Vec<&Variant> = VARIANTS.iter().filter(|v| cfg.wants("obvhs", v.key)).collect();
+    let variants: Vec<&Variant> = VARIANTS
+        .iter()
+        .filter(|v| cfg.wants("obvhs", v.key))
+        .collect();
     if variants.is_empty() {
         return Vec::new();
     }
@@ -73,7 +81,11 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         .iter()
         .map(|t| {
             let [a, b, c] = t.map(|i| Vec3A::from(scene.positions[i as usize]));
-            Triangle { v0: a, v1: b, v2: c }
+            Triangle {
+                v0: a,
+                v1: b,
+                v2: c,
+            }
         })
         .collect();
     let mut rows = Vec::new();
@@ -94,7 +106,9 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             });
             row.build_ms.insert(t, ms);
         }
-        let bvh = traced.unwrap_or_else(|| build_cwbvh_from_tris(&tris, (v.params)(), &mut Duration::default()));
+        let bvh = traced.unwrap_or_else(|| {
+            build_cwbvh_from_tris(&tris, (v.params)(), &mut Duration::default())
+        });
         row.bytes = Some(
             (bvh.nodes.len() * std::mem::size_of::<CwBvhNode>()
                 + bvh.primitive_indices.len() * 4
@@ -109,10 +123,16 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             let a = n.aabb();
             let area = sah::area(a.min.into(), a.max.into());
             if n.prim_count > 0 {
-                Node::Leaf { area, count: n.prim_count }
+                Node::Leaf {
+                    area,
+                    count: n.prim_count,
+                }
             } else {
                 let l = n.first_index as usize;
-                Node::Inner { area, children: [l, l + 1] }
+                Node::Inner {
+                    area,
+                    children: [l, l + 1],
+                }
             }
         }));
         row.sah_note = "obvhs BVH2 of the same preset (collapsed leaves)".into();

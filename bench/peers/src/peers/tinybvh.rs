@@ -58,9 +58,27 @@ struct Variant {
 }
 
 const VARIANTS: [Variant; 3] = [
-    Variant { key: "Build", desc: "Build (binned SAH) + BVH8_CPU", kind: 0, class: Class::Default, slow: false },
-    Variant { key: "BuildAVX", desc: "BuildAVX (binned SAH) + BVH8_CPU", kind: 1, class: Class::Default, slow: false },
-    Variant { key: "BuildHQ", desc: "BuildHQ (SBVH) + BVH8_CPU", kind: 2, class: Class::FastTrace, slow: true },
+    Variant {
+        key: "Build",
+        desc: "Build (binned SAH) + BVH8_CPU",
+        kind: 0,
+        class: Class::Default,
+        slow: false,
+    },
+    Variant {
+        key: "BuildAVX",
+        desc: "BuildAVX (binned SAH) + BVH8_CPU",
+        kind: 1,
+        class: Class::Default,
+        slow: false,
+    },
+    Variant {
+        key: "BuildHQ",
+        desc: "BuildHQ (SBVH) + BVH8_CPU",
+        kind: 2,
+        class: Class::FastTrace,
+        slow: true,
+    },
 ];
 
 struct Handle(*mut c_void);
@@ -81,10 +99,16 @@ fn bvh2_sah(h: &Handle) -> f64 {
         let n = nodes[i];
         let area = sah::area(n.min, n.max);
         if n.tri_count > 0 {
-            Node::Leaf { area, count: n.tri_count }
+            Node::Leaf {
+                area,
+                count: n.tri_count,
+            }
         } else {
             let l = n.left_first as usize;
-            Node::Inner { area, children: [l, l + 1] }
+            Node::Inner {
+                area,
+                children: [l, l + 1],
+            }
         }
     })
 }
@@ -93,14 +117,32 @@ fn trace(h: &Handle, rays: &[Ray], hits: &mut [Hit]) {
     let n = rays.len();
     let mut t = vec![0f32; n];
     let mut p = vec![0u32; n];
-    unsafe { tbp_trace_bvh8(h.0, rays.as_ptr() as *const f32, n as u32, t.as_mut_ptr(), p.as_mut_ptr()) };
+    unsafe {
+        tbp_trace_bvh8(
+            h.0,
+            rays.as_ptr() as *const f32,
+            n as u32,
+            t.as_mut_ptr(),
+            p.as_mut_ptr(),
+        )
+    };
     for i in 0..n {
-        hits[i] = if p[i] != u32::MAX { Hit { t: t[i], prim: p[i] } } else { Hit::MISS };
+        hits[i] = if p[i] != u32::MAX {
+            Hit {
+                t: t[i],
+                prim: p[i],
+            }
+        } else {
+            Hit::MISS
+        };
     }
 }
 
 pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
-    let variants: Vec<&Variant> = VARIANTS.iter().filter(|v| cfg.wants("tinybvh", v.key)).collect();
+    let variants: Vec<&Variant> = VARIANTS
+        .iter()
+        .filter(|v| cfg.wants("tinybvh", v.key))
+        .collect();
     let do_refit = cfg.refit && cfg.wants("tinybvh", "refit");
     if variants.is_empty() && !do_refit {
         return Vec::new();
@@ -115,7 +157,11 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         let mut bvh2_ms = serde_json::Map::new();
         let mut kept: Option<Handle> = None;
         for &t in &cfg.threads {
-            let (reps, warm) = if v.slow { (cfg.slow_reps, cfg.slow_warmup) } else { (cfg.reps, cfg.warmup) };
+            let (reps, warm) = if v.slow {
+                (cfg.slow_reps, cfg.slow_warmup)
+            } else {
+                (cfg.reps, cfg.warmup)
+            };
             let reps = reps.max(1);
             let threaded = (t > 1) as i32;
             let mut b2 = Vec::new();
@@ -130,7 +176,10 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
                     // The traced structure, SAH (of the BVH2 before widening) and bytes come
                     // from the last 1-thread build; the SAH walk is not timed.
                     row.sah = Some(bvh2_sah(&h));
-                    row.extra.insert("tinybvh_sahcost".into(), json!(unsafe { tbp_bvh2_sahcost(h.0) }));
+                    row.extra.insert(
+                        "tinybvh_sahcost".into(),
+                        json!(unsafe { tbp_bvh2_sahcost(h.0) }),
+                    );
                 }
                 let t1 = Instant::now();
                 unsafe { tbp_convert_bvh8(h.0) };
@@ -149,16 +198,23 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         if cfg.threads.len() > 1 && hw != *cfg.threads.last().unwrap() {
             row.note = format!("threaded builds use hardware_concurrency() = {hw} threads");
         }
-        row.extra.insert("bvh2_ms".into(), serde_json::Value::Object(bvh2_ms));
+        row.extra
+            .insert("bvh2_ms".into(), serde_json::Value::Object(bvh2_ms));
         if v.kind == 0 {
             // Sanity check of the shim: tinybvh-rs's own `BVH::new` runs the same reference
             // builder from the same header; its SAH must match the shim's (untimed).
             if let Ok(b) = tinybvh_rs::bvh::BVH::new(soup.as_slice().into()) {
                 let theirs = b.sah_cost(0);
                 row.extra.insert("tinybvh_rs_sahcost".into(), json!(theirs));
-                let ours = row.extra.get("tinybvh_sahcost").and_then(|x| x.as_f64()).unwrap_or(f64::NAN);
+                let ours = row
+                    .extra
+                    .get("tinybvh_sahcost")
+                    .and_then(|x| x.as_f64())
+                    .unwrap_or(f64::NAN);
                 if ((ours - theirs as f64) / ours).abs() > 1e-3 {
-                    row.note = format!("shim SAHCost {ours:.3} differs from tinybvh-rs BVH::new {theirs:.3}");
+                    row.note = format!(
+                        "shim SAHCost {ours:.3} differs from tinybvh-rs BVH::new {theirs:.3}"
+                    );
                 }
             }
         }
@@ -171,7 +227,12 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         rows.push(row);
     }
     if do_refit {
-        let mut row = Row::new("tinybvh", "refit", "refit: BVH::Refit on a Build BVH2 (1 thread only)", Some(Class::Default));
+        let mut row = Row::new(
+            "tinybvh",
+            "refit",
+            "refit: BVH::Refit on a Build BVH2 (1 thread only)",
+            Some(Class::Default),
+        );
         let mut buf = soup.clone();
         let moved = scene.soup4(&crate::scene::deformed(scene));
         let h = unsafe { tbp_refit_new(buf.as_ptr() as *const f32, n) };

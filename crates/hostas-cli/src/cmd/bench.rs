@@ -261,7 +261,9 @@ fn trace_speed(device: &Device, tlas: AccelerationStructure, rays: &[Ray]) -> Re
         .par_chunks(1024)
         .map(|c| {
             let mut tracer = scene.tracer();
-            c.iter().map(|r| tracer.closest(r).map(|h| h.is_hit() as usize)).sum::<hostas::Result<usize>>()
+            c.iter()
+                .map(|r| tracer.closest(r).map(|h| h.is_hit() as usize))
+                .sum::<hostas::Result<usize>>()
         })
         .collect::<hostas::Result<Vec<usize>>>()
         .map_err(|e| anyhow!("{e}"))?

@@ -22,7 +22,10 @@ struct B4 {
 }
 
 impl B4 {
-    const EMPTY: B4 = B4 { lo: [f32::INFINITY; 4], hi: [f32::NEG_INFINITY; 4] };
+    const EMPTY: B4 = B4 {
+        lo: [f32::INFINITY; 4],
+        hi: [f32::NEG_INFINITY; 4],
+    };
 
     #[inline(always)]
     fn of(r: &PrimRef) -> B4 {
@@ -45,14 +48,21 @@ impl B4 {
     }
     #[inline(always)]
     fn half_area(&self) -> f32 {
-        let d = [self.hi[0] - self.lo[0], self.hi[1] - self.lo[1], self.hi[2] - self.lo[2]];
+        let d = [
+            self.hi[0] - self.lo[0],
+            self.hi[1] - self.lo[1],
+            self.hi[2] - self.lo[2],
+        ];
         if d[0] < 0.0 || d[1] < 0.0 || d[2] < 0.0 {
             return 0.0;
         }
         d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
     }
     fn aabb(&self) -> Aabb {
-        Aabb { lo: [self.lo[0], self.lo[1], self.lo[2]], hi: [self.hi[0], self.hi[1], self.hi[2]] }
+        Aabb {
+            lo: [self.lo[0], self.lo[1], self.lo[2]],
+            hi: [self.hi[0], self.hi[1], self.hi[2]],
+        }
     }
 }
 
@@ -71,7 +81,10 @@ struct Acc {
 }
 
 impl Acc {
-    const EMPTY: Acc = Acc { bounds: B4::EMPTY, centroids: B4::EMPTY };
+    const EMPTY: Acc = Acc {
+        bounds: B4::EMPTY,
+        centroids: B4::EMPTY,
+    };
     #[inline(always)]
     fn add(&mut self, r: &PrimRef) {
         let b = B4::of(r);
@@ -80,19 +93,31 @@ impl Acc {
         self.centroids.grow_point(&c);
     }
     fn info(&self) -> RangeInfo {
-        RangeInfo { bounds: self.bounds.aabb(), centroids: self.centroids.aabb() }
+        RangeInfo {
+            bounds: self.bounds.aabb(),
+            centroids: self.centroids.aabb(),
+        }
     }
 }
 
 impl RangeInfo {
-    pub const EMPTY: RangeInfo = RangeInfo { bounds: Aabb::EMPTY, centroids: Aabb::EMPTY };
+    pub const EMPTY: RangeInfo = RangeInfo {
+        bounds: Aabb::EMPTY,
+        centroids: Aabb::EMPTY,
+    };
 
     fn merge(a: RangeInfo, b: RangeInfo) -> RangeInfo {
-        RangeInfo { bounds: a.bounds.union(&b.bounds), centroids: a.centroids.union(&b.centroids) }
+        RangeInfo {
+            bounds: a.bounds.union(&b.bounds),
+            centroids: a.centroids.union(&b.centroids),
+        }
     }
     pub fn of(refs: &[PrimRef]) -> RangeInfo {
         if refs.len() > PARALLEL_THRESHOLD * 4 {
-            return refs.par_chunks(PARALLEL_THRESHOLD).map(RangeInfo::of).reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
+            return refs
+                .par_chunks(PARALLEL_THRESHOLD)
+                .map(RangeInfo::of)
+                .reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
         }
         let mut acc = Acc::EMPTY;
         for r in refs {
@@ -130,14 +155,25 @@ impl Binner {
         let mut scale = [0f32; 3];
         for k in 0..3 {
             let ext = centroids.hi[k] - centroids.lo[k];
-            scale[k] = if ext > 0.0 { bins as f32 * (1.0 - 1e-6) / ext } else { 0.0 };
+            scale[k] = if ext > 0.0 {
+                bins as f32 * (1.0 - 1e-6) / ext
+            } else {
+                0.0
+            };
         }
-        Binner { lo: centroids.lo, scale, bins }
+        Binner {
+            lo: centroids.lo,
+            scale,
+            bins,
+        }
     }
     #[inline(always)]
     fn bin(&self, c: f32, k: usize) -> usize {
         // Clamped in float first, so the conversion is a plain truncation (NaN gives 0).
-        let f = fmin(fmax((c - self.lo[k]) * self.scale[k], 0.0), (self.bins - 1) as f32);
+        let f = fmin(
+            fmax((c - self.lo[k]) * self.scale[k], 0.0),
+            (self.bins - 1) as f32,
+        );
         f as i32 as usize
     }
 }
@@ -149,7 +185,10 @@ struct Bins<const N: usize> {
 
 impl<const N: usize> Bins<N> {
     fn new() -> Bins<N> {
-        Bins { bounds: [[B4::EMPTY; N]; 3], counts: [[0; N]; 3] }
+        Bins {
+            bounds: [[B4::EMPTY; N]; 3],
+            counts: [[0; N]; 3],
+        }
     }
     fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
         for r in refs {
@@ -204,7 +243,10 @@ impl<const N: usize> Bins<N> {
     }
 }
 
-fn best_bin_split_n<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f32)> {
+fn best_bin_split_n<const N: usize>(
+    refs: &[PrimRef],
+    binner: &Binner,
+) -> Option<(usize, usize, f32)> {
     let bins = if refs.len() > PARALLEL_THRESHOLD * 4 {
         refs.par_chunks(PARALLEL_THRESHOLD)
             .map(|c| {
@@ -233,9 +275,16 @@ fn best_bin_split(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f3
 /// Partitions a large range on all threads: count each chunk's left side, then scatter every
 /// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
 /// sequential stable partition, whatever the thread count.
-fn parallel_partition(refs: &mut [PrimRef], aux: &mut [PrimRef], left_of: impl Fn(&PrimRef) -> bool + Sync) -> (usize, RangeInfo, RangeInfo) {
+fn parallel_partition(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    left_of: impl Fn(&PrimRef) -> bool + Sync,
+) -> (usize, RangeInfo, RangeInfo) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
-    let lefts: Vec<usize> = refs.par_chunks(CHUNK).map(|c| c.iter().filter(|r| left_of(r)).count()).collect();
+    let lefts: Vec<usize> = refs
+        .par_chunks(CHUNK)
+        .map(|c| c.iter().filter(|r| left_of(r)).count())
+        .collect();
     let total_left: usize = lefts.iter().sum();
     // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
     let (mut left_part, mut right_part) = aux.split_at_mut(total_left);
@@ -268,23 +317,45 @@ fn parallel_partition(refs: &mut [PrimRef], aux: &mut [PrimRef], left_of: impl F
             (la, ra)
         })
         .collect();
-    refs.par_chunks_mut(CHUNK).zip(aux.par_chunks(CHUNK)).for_each(|(d, s)| d.copy_from_slice(s));
-    let (left, right) = infos.iter().fold((RangeInfo::EMPTY, RangeInfo::EMPTY), |(l, r), (a, b)| (RangeInfo::merge(l, a.info()), RangeInfo::merge(r, b.info())));
+    refs.par_chunks_mut(CHUNK)
+        .zip(aux.par_chunks(CHUNK))
+        .for_each(|(d, s)| d.copy_from_slice(s));
+    let (left, right) = infos
+        .iter()
+        .fold((RangeInfo::EMPTY, RangeInfo::EMPTY), |(l, r), (a, b)| {
+            (RangeInfo::merge(l, a.info()), RangeInfo::merge(r, b.info()))
+        });
     (total_left, left, right)
 }
 
 /// Binned split, partitioning `refs` in place (through `aux` when large).
-fn binned_split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx) -> Option<Split> {
+fn binned_split(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    info: &RangeInfo,
+    ctx: &Ctx,
+) -> Option<Split> {
     // Small ranges gain nothing from many bins; they only pay for sweeping them.
-    let bins = if refs.len() < 256 { ctx.bins.min(8) } else { ctx.bins };
+    let bins = if refs.len() < 256 {
+        ctx.bins.min(8)
+    } else {
+        ctx.bins
+    };
     let binner = Binner::new(&info.centroids, bins);
     if binner.scale == [0.0; 3] {
         return None;
     }
     let (axis, bin, cost) = best_bin_split(refs, &binner)?;
     if refs.len() > PARALLEL_THRESHOLD * 16 {
-        let (mid, left, right) = parallel_partition(refs, aux, |r| binner.bin(r.lo[axis] + r.hi[axis], axis) < bin);
-        return (mid > 0 && mid < refs.len()).then_some(Split { mid, left, right, cost });
+        let (mid, left, right) = parallel_partition(refs, aux, |r| {
+            binner.bin(r.lo[axis] + r.hi[axis], axis) < bin
+        });
+        return (mid > 0 && mid < refs.len()).then_some(Split {
+            mid,
+            left,
+            right,
+            cost,
+        });
     }
     let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
     let (mut i, mut j) = (0, refs.len());
@@ -299,7 +370,12 @@ fn binned_split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx
             right.add(&r);
         }
     }
-    (i > 0 && i < refs.len()).then_some(Split { mid: i, left: left.info(), right: right.info(), cost })
+    (i > 0 && i < refs.len()).then_some(Split {
+        mid: i,
+        left: left.info(),
+        right: right.info(),
+        cost,
+    })
 }
 
 /// Exact SAH split of a small range: order by centroid on each axis (a sort of small keys, not
@@ -308,7 +384,8 @@ fn binned_split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx
 fn sweep_split(refs: &mut [PrimRef]) -> Split {
     let n = refs.len();
     debug_assert!(n <= SMALL);
-    let boxes: [B4; SMALL] = std::array::from_fn(|i| if i < n { B4::of(&refs[i]) } else { B4::EMPTY });
+    let boxes: [B4; SMALL] =
+        std::array::from_fn(|i| if i < n { B4::of(&refs[i]) } else { B4::EMPTY });
     let mut best = (f32::INFINITY, 0usize, n / 2);
     let mut best_order = [0u8; SMALL];
     let mut right_area = [0f32; SMALL];
@@ -345,12 +422,23 @@ fn sweep_split(refs: &mut [PrimRef]) -> Split {
     }
     let (cost, _, mid) = best;
     if cost.is_finite() {
-        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| if i < n { refs[i] } else { PrimRef::new(&Aabb::EMPTY, 0) });
+        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| {
+            if i < n {
+                refs[i]
+            } else {
+                PrimRef::new(&Aabb::EMPTY, 0)
+            }
+        });
         for (dst, &src) in refs.iter_mut().zip(&best_order[..n]) {
             *dst = copy[src as usize];
         }
     }
-    Split { mid, left: RangeInfo::of(&refs[..mid]), right: RangeInfo::of(&refs[mid..]), cost }
+    Split {
+        mid,
+        left: RangeInfo::of(&refs[..mid]),
+        right: RangeInfo::of(&refs[mid..]),
+        cost,
+    }
 }
 
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
@@ -358,14 +446,31 @@ fn sweep_split(refs: &mut [PrimRef]) -> Split {
 fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     let mid = refs.len() / 2;
     let ext = [0, 1, 2].map(|k| info.centroids.hi[k] - info.centroids.lo[k]);
-    let axis = (0..3).max_by(|&a, &b| ext[a].total_cmp(&ext[b])).unwrap_or(0);
+    let axis = (0..3)
+        .max_by(|&a, &b| ext[a].total_cmp(&ext[b]))
+        .unwrap_or(0);
     if ext[axis] > 0.0 {
-        refs.select_nth_unstable_by(mid, |a, b| (a.lo[axis] + a.hi[axis]).total_cmp(&(b.lo[axis] + b.hi[axis])).then(a.id.cmp(&b.id)));
+        refs.select_nth_unstable_by(mid, |a, b| {
+            (a.lo[axis] + a.hi[axis])
+                .total_cmp(&(b.lo[axis] + b.hi[axis]))
+                .then(a.id.cmp(&b.id))
+        });
     }
-    Split { mid, left: RangeInfo::of(&refs[..mid]), right: RangeInfo::of(&refs[mid..]), cost: f32::INFINITY }
+    Split {
+        mid,
+        left: RangeInfo::of(&refs[..mid]),
+        right: RangeInfo::of(&refs[mid..]),
+        cost: f32::INFINITY,
+    }
 }
 
-fn split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx, depth: u32) -> Split {
+fn split(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    info: &RangeInfo,
+    ctx: &Ctx,
+    depth: u32,
+) -> Split {
     if depth >= MEDIAN_DEPTH {
         return median_split(refs, info);
     }
@@ -375,13 +480,25 @@ fn split(refs: &mut [PrimRef], aux: &mut [PrimRef], info: &RangeInfo, ctx: &Ctx,
     binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info))
 }
 
-pub fn build(refs: &mut [PrimRef], aux: &mut [PrimRef], bins: usize, max_leaf: usize, traversal_cost: f32) -> Tree {
+pub fn build(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    bins: usize,
+    max_leaf: usize,
+    traversal_cost: f32,
+) -> Tree {
     if refs.is_empty() {
         return Tree { root: None };
     }
-    let ctx = Ctx { bins: bins.clamp(2, MAX_BINS), max_leaf: max_leaf.clamp(4, crate::layout::MAX_LEAF_SIZE), traversal_cost };
+    let ctx = Ctx {
+        bins: bins.clamp(2, MAX_BINS),
+        max_leaf: max_leaf.clamp(4, crate::layout::MAX_LEAF_SIZE),
+        traversal_cost,
+    };
     let info = RangeInfo::of(refs);
-    Tree { root: Some(build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0)) }
+    Tree {
+        root: Some(build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0)),
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -391,9 +508,22 @@ struct Part {
     info: RangeInfo,
 }
 
-fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: RangeInfo, ctx: &Ctx, depth: u32) -> (Aabb, Child) {
+fn build_child(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    base: u32,
+    info: RangeInfo,
+    ctx: &Ctx,
+    depth: u32,
+) -> (Aabb, Child) {
     let n = refs.len();
-    let leaf = (info.bounds, Child::Leaf { first: base, count: n as u32 });
+    let leaf = (
+        info.bounds,
+        Child::Leaf {
+            first: base,
+            count: n as u32,
+        },
+    );
     // Fewer primitives than a node has slots: always a leaf (so every inner node is full).
     if n < WIDTH {
         return leaf;
@@ -407,9 +537,21 @@ fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: Range
             return leaf;
         }
     }
-    let mut parts = [Part { begin: 0, end: 0, info: RangeInfo::EMPTY }; WIDTH];
-    parts[0] = Part { begin: 0, end: first.mid, info: first.left };
-    parts[1] = Part { begin: first.mid, end: n, info: first.right };
+    let mut parts = [Part {
+        begin: 0,
+        end: 0,
+        info: RangeInfo::EMPTY,
+    }; WIDTH];
+    parts[0] = Part {
+        begin: 0,
+        end: first.mid,
+        info: first.left,
+    };
+    parts[1] = Part {
+        begin: first.mid,
+        end: n,
+        info: first.right,
+    };
     let mut count = 2;
     while count < WIDTH {
         // Split the part with the largest area that has at least two primitives.
@@ -424,9 +566,23 @@ fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: Range
         }
         let Some(i) = pick else { break };
         let p = parts[i];
-        let s = split(&mut refs[p.begin..p.end], &mut aux[p.begin..p.end], &p.info, ctx, depth);
-        parts[i] = Part { begin: p.begin, end: p.begin + s.mid, info: s.left };
-        parts[count] = Part { begin: p.begin + s.mid, end: p.end, info: s.right };
+        let s = split(
+            &mut refs[p.begin..p.end],
+            &mut aux[p.begin..p.end],
+            &p.info,
+            ctx,
+            depth,
+        );
+        parts[i] = Part {
+            begin: p.begin,
+            end: p.begin + s.mid,
+            info: s.left,
+        };
+        parts[count] = Part {
+            begin: p.begin + s.mid,
+            end: p.end,
+            info: s.right,
+        };
         count += 1;
     }
     let parts = &mut parts[..count];
@@ -447,10 +603,19 @@ fn build_child(refs: &mut [PrimRef], aux: &mut [PrimRef], base: u32, info: Range
         at = p.end;
     }
     let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> = slices.into_par_iter().flatten().map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)).collect();
+        let children: Vec<(Aabb, Child)> = slices
+            .into_par_iter()
+            .flatten()
+            .map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1))
+            .collect();
         InnerNode::new(children)
     } else {
-        InnerNode::new(slices.into_iter().flatten().map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)))
+        InnerNode::new(
+            slices
+                .into_iter()
+                .flatten()
+                .map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)),
+        )
     };
     (info.bounds, Child::Inner(Box::new(node)))
 }

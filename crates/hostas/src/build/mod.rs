@@ -25,15 +25,27 @@ pub struct PrimRef {
 
 impl PrimRef {
     pub fn new(b: &Aabb, id: u32) -> Self {
-        PrimRef { lo: b.lo, id, hi: b.hi, pad: 0 }
+        PrimRef {
+            lo: b.lo,
+            id,
+            hi: b.hi,
+            pad: 0,
+        }
     }
     #[inline(always)]
     pub fn bounds(&self) -> Aabb {
-        Aabb { lo: self.lo, hi: self.hi }
+        Aabb {
+            lo: self.lo,
+            hi: self.hi,
+        }
     }
     #[inline(always)]
     pub fn center2(&self) -> [f32; 3] {
-        [self.lo[0] + self.hi[0], self.lo[1] + self.hi[1], self.lo[2] + self.hi[2]]
+        [
+            self.lo[0] + self.hi[0],
+            self.lo[1] + self.hi[1],
+            self.lo[2] + self.hi[2],
+        ]
     }
 }
 
@@ -60,14 +72,40 @@ pub struct Preset {
 }
 
 impl Preset {
-    pub const FAST_TRACE: Preset =
-        Preset { name: "fast-trace", id: 1, algorithm: Algorithm::BinnedSah { bins: 32 }, max_leaf: 8, traversal_cost: 2.0 };
-    pub const FAST_BUILD: Preset = Preset { name: "fast-build", id: 2, algorithm: Algorithm::Morton, max_leaf: 7, traversal_cost: 1.0 };
-    pub const DEFAULT: Preset =
-        Preset { name: "default", id: 0, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 8, traversal_cost: 3.0 };
-    pub const LOW_MEMORY: Preset =
-        Preset { name: "low-memory", id: 3, algorithm: Algorithm::BinnedSah { bins: 16 }, max_leaf: 15, traversal_cost: 6.0 };
-    pub const ALL: [Preset; 4] = [Preset::FAST_TRACE, Preset::FAST_BUILD, Preset::DEFAULT, Preset::LOW_MEMORY];
+    pub const FAST_TRACE: Preset = Preset {
+        name: "fast-trace",
+        id: 1,
+        algorithm: Algorithm::BinnedSah { bins: 32 },
+        max_leaf: 8,
+        traversal_cost: 2.0,
+    };
+    pub const FAST_BUILD: Preset = Preset {
+        name: "fast-build",
+        id: 2,
+        algorithm: Algorithm::Morton,
+        max_leaf: 7,
+        traversal_cost: 1.0,
+    };
+    pub const DEFAULT: Preset = Preset {
+        name: "default",
+        id: 0,
+        algorithm: Algorithm::BinnedSah { bins: 16 },
+        max_leaf: 8,
+        traversal_cost: 3.0,
+    };
+    pub const LOW_MEMORY: Preset = Preset {
+        name: "low-memory",
+        id: 3,
+        algorithm: Algorithm::BinnedSah { bins: 16 },
+        max_leaf: 15,
+        traversal_cost: 6.0,
+    };
+    pub const ALL: [Preset; 4] = [
+        Preset::FAST_TRACE,
+        Preset::FAST_BUILD,
+        Preset::DEFAULT,
+        Preset::LOW_MEMORY,
+    ];
 
     /// The preset the build flags select. `PREFER_FAST_TRACE` and `PREFER_FAST_BUILD` are
     /// exclusive (validated before); `LOW_MEMORY` wins over the default only.
@@ -96,9 +134,17 @@ pub(crate) const MEDIAN_DEPTH: u32 = 40;
 
 /// Builds a tree over `refs`, reordering them: leaves refer to final positions in `refs`.
 /// `aux`, `keys` and `keys_tmp` are working space of the same length (from build scratch).
-pub fn build(preset: &Preset, refs: &mut [PrimRef], aux: &mut [PrimRef], keys: &mut [u64], keys_tmp: &mut [u64]) -> tree::Tree {
+pub fn build(
+    preset: &Preset,
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    keys: &mut [u64],
+    keys_tmp: &mut [u64],
+) -> tree::Tree {
     match preset.algorithm {
-        Algorithm::BinnedSah { bins } => binned_sah::build(refs, aux, bins, preset.max_leaf, preset.traversal_cost),
+        Algorithm::BinnedSah { bins } => {
+            binned_sah::build(refs, aux, bins, preset.max_leaf, preset.traversal_cost)
+        }
         Algorithm::Morton => morton::build(refs, aux, keys, keys_tmp, preset.max_leaf),
     }
 }

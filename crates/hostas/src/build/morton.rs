@@ -46,7 +46,13 @@ fn radix_sort(keys: &mut [u64], tmp: &mut [u64]) {
     // Four passes: the sorted data is back in `keys`.
 }
 
-pub fn build(refs: &mut [PrimRef], aux: &mut [PrimRef], keys: &mut [u64], tmp: &mut [u64], max_leaf: usize) -> Tree {
+pub fn build(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    keys: &mut [u64],
+    tmp: &mut [u64],
+    max_leaf: usize,
+) -> Tree {
     let n = refs.len();
     if n == 0 {
         return Tree { root: None };
@@ -62,17 +68,33 @@ pub fn build(refs: &mut [PrimRef], aux: &mut [PrimRef], keys: &mut [u64], tmp: &
         let q = [0, 1, 2].map(|k| (((p[k] - c.lo[k]) * scale[k]) as u32).min(1023)); // NaN gives 0
         (spread(q[0]) << 2) | (spread(q[1]) << 1) | spread(q[2])
     };
-    keys[..n].par_iter_mut().zip(refs.par_iter()).enumerate().with_min_len(PARALLEL_THRESHOLD).for_each(|(i, (k, r))| {
-        *k = (code(r) as u64) << 32 | i as u64;
-    });
+    keys[..n]
+        .par_iter_mut()
+        .zip(refs.par_iter())
+        .enumerate()
+        .with_min_len(PARALLEL_THRESHOLD)
+        .for_each(|(i, (k, r))| {
+            *k = (code(r) as u64) << 32 | i as u64;
+        });
     radix_sort(&mut keys[..n], tmp);
     // The sorted codes, for splitting.
-    tmp[..n].par_iter_mut().zip(keys[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(t, k)| {
-        *t = k >> 32;
-    });
+    tmp[..n]
+        .par_iter_mut()
+        .zip(keys[..n].par_iter())
+        .with_min_len(PARALLEL_THRESHOLD)
+        .for_each(|(t, k)| {
+            *t = k >> 32;
+        });
     // Put the references in sorted order, so leaves read their bounds sequentially.
-    aux[..n].par_iter_mut().zip(keys[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(a, k)| *a = refs[(*k & 0xffff_ffff) as usize]);
-    refs.par_iter_mut().zip(aux[..n].par_iter()).with_min_len(PARALLEL_THRESHOLD).for_each(|(r, a)| *r = *a);
+    aux[..n]
+        .par_iter_mut()
+        .zip(keys[..n].par_iter())
+        .with_min_len(PARALLEL_THRESHOLD)
+        .for_each(|(a, k)| *a = refs[(*k & 0xffff_ffff) as usize]);
+    refs.par_iter_mut()
+        .zip(aux[..n].par_iter())
+        .with_min_len(PARALLEL_THRESHOLD)
+        .for_each(|(r, a)| *r = *a);
     let codes = &tmp[..n];
     let root = build_child(refs, codes, 0, max_leaf.max(4), 0);
     Tree { root: Some(root) }
@@ -92,30 +114,60 @@ fn split_point(codes: &[u64]) -> usize {
     codes.partition_point(|&c| (c & mask) == prefix)
 }
 
-fn build_child(refs: &[PrimRef], codes: &[u64], base: u32, max_leaf: usize, depth: u32) -> (Aabb, Child) {
+fn build_child(
+    refs: &[PrimRef],
+    codes: &[u64],
+    base: u32,
+    max_leaf: usize,
+    depth: u32,
+) -> (Aabb, Child) {
     let n = refs.len();
     if n <= max_leaf.max(WIDTH - 1) {
         let mut b = Aabb::EMPTY;
         for r in refs {
             b = b.union(&r.bounds());
         }
-        return (b, Child::Leaf { first: base, count: n as u32 });
+        return (
+            b,
+            Child::Leaf {
+                first: base,
+                count: n as u32,
+            },
+        );
     }
     let mut parts = [(0usize, 0usize); WIDTH];
     parts[0] = (0, n);
     for count in 1..WIDTH {
         // Split the part with the most primitives (areas are not known top-down).
-        let Some(i) = (0..count).filter(|&i| parts[i].1 - parts[i].0 >= 2).max_by_key(|&i| (parts[i].1 - parts[i].0, usize::MAX - i)) else { break };
+        let Some(i) = (0..count)
+            .filter(|&i| parts[i].1 - parts[i].0 >= 2)
+            .max_by_key(|&i| (parts[i].1 - parts[i].0, usize::MAX - i))
+        else {
+            break;
+        };
         let (b, e) = parts[i];
-        let mid = if depth < MEDIAN_DEPTH { split_point(&codes[b..e]) } else { (e - b) / 2 };
+        let mid = if depth < MEDIAN_DEPTH {
+            split_point(&codes[b..e])
+        } else {
+            (e - b) / 2
+        };
         let mid = mid.clamp(1, e - b - 1);
         parts[i] = (b, b + mid);
         parts[count] = (b + mid, e);
     }
     parts.sort_by_key(|&(b, e)| (e == b, b));
-    let build = |&(b, e): &(usize, usize)| build_child(&refs[b..e], &codes[b..e], base + b as u32, max_leaf, depth + 1);
+    let build = |&(b, e): &(usize, usize)| {
+        build_child(
+            &refs[b..e],
+            &codes[b..e],
+            base + b as u32,
+            max_leaf,
+            depth + 1,
+        )
+    };
     let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> = parts.par_iter().filter(|p| p.1 > p.0).map(build).collect();
+        let children: Vec<(Aabb, Child)> =
+            parts.par_iter().filter(|p| p.1 > p.0).map(build).collect();
         InnerNode::new(children)
     } else {
         InnerNode::new(parts.iter().filter(|p| p.1 > p.0).map(build))

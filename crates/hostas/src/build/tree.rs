@@ -7,7 +7,10 @@ use crate::math::Aabb;
 #[derive(Debug)]
 pub enum Child {
     /// Primitives `first..first + count` of the final order.
-    Leaf { first: u32, count: u32 },
+    Leaf {
+        first: u32,
+        count: u32,
+    },
     Inner(Box<InnerNode>),
 }
 
@@ -24,7 +27,11 @@ pub struct InnerNode {
 
 impl InnerNode {
     pub fn new(children: impl IntoIterator<Item = (Aabb, Child)>) -> InnerNode {
-        let mut node = InnerNode { slots: std::array::from_fn(|_| (Aabb::EMPTY, Child::Leaf { first: 0, count: 0 })), len: 0, nodes: 1 };
+        let mut node = InnerNode {
+            slots: std::array::from_fn(|_| (Aabb::EMPTY, Child::Leaf { first: 0, count: 0 })),
+            len: 0,
+            nodes: 1,
+        };
         for c in children.into_iter().take(WIDTH) {
             if let Child::Inner(n) = &c.1 {
                 node.nodes += n.nodes;

@@ -2,7 +2,7 @@
 //! update).
 
 use super::validate;
-use crate::build::{self, PrimRef, Preset};
+use crate::build::{self, Preset, PrimRef};
 use crate::device::{AccelerationStructure, AsObject, Device};
 use crate::error::{Error, Location, Result};
 use crate::input::aabbs::AabbReader;
@@ -13,8 +13,8 @@ use crate::layout::encode::{self, HeaderFields};
 use crate::layout::plan::{self, Plan};
 use crate::layout::view::{self, View};
 use crate::layout::{
-    EMPTY_CHILD, GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord, Kind, LEAF_BIT, Node,
-    PrimKind,
+    EMPTY_CHILD, GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord,
+    Kind, LEAF_BIT, Node, PrimKind,
 };
 use crate::math::{Aabb, Affine};
 use ash::vk;
@@ -58,18 +58,30 @@ impl Device {
     ) -> Result<BuildSizes> {
         let at = Location::NONE;
         if build_type == vk::AccelerationStructureBuildTypeKHR::DEVICE {
-            return Err(Error::NotSupported("device builds (buildType DEVICE): hostas implements the host commands".into()));
+            return Err(Error::NotSupported(
+                "device builds (buildType DEVICE): hostas implements the host commands".into(),
+            ));
         }
         let (kind, prim_kind) = validate::info(info, at)?;
         if max_primitive_counts.len() != info.geometries.len() {
             return Err(Error::vuid(
                 "VUID-vkGetAccelerationStructureBuildSizesKHR-pBuildInfo-03619",
                 at,
-                format!("{} maximum primitive counts for {} geometries", max_primitive_counts.len(), info.geometries.len()),
+                format!(
+                    "{} maximum primitive counts for {} geometries",
+                    max_primitive_counts.len(),
+                    info.geometries.len()
+                ),
             ));
         }
         let total: u64 = max_primitive_counts.iter().map(|&c| c as u64).sum();
-        validate::counts(kind, prim_kind, total, at, "VUID-vkGetAccelerationStructureBuildSizesKHR-pBuildInfo-03785")?;
+        validate::counts(
+            kind,
+            prim_kind,
+            total,
+            at,
+            "VUID-vkGetAccelerationStructureBuildSizesKHR-pBuildInfo-03785",
+        )?;
         let plan = Plan::new(prim_kind, info.geometries.len() as u64, total);
         Ok(BuildSizes {
             acceleration_structure_size: plan.total_size,
@@ -82,9 +94,17 @@ impl Device {
     /// `ranges[i]` holds one range per geometry of `infos[i]`. Infos are independent; each
     /// is built with all threads of the current rayon pool.
     #[doc(alias = "vkBuildAccelerationStructuresKHR")]
-    pub fn build_acceleration_structures(&self, infos: &mut [BuildGeometryInfo], ranges: &[&[BuildRangeInfo]]) -> Result<()> {
+    pub fn build_acceleration_structures(
+        &self,
+        infos: &mut [BuildGeometryInfo],
+        ranges: &[&[BuildRangeInfo]],
+    ) -> Result<()> {
         if infos.is_empty() {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-infoCount-arraylength", Location::NONE, "infoCount must be greater than 0"));
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-infoCount-arraylength",
+                Location::NONE,
+                "infoCount must be greater than 0",
+            ));
         }
         if ranges.len() != infos.len() {
             return Err(Error::vuid(
@@ -97,9 +117,22 @@ impl Device {
         let mut dsts: Vec<AsObject> = Vec::with_capacity(infos.len());
         for (i, info) in infos.iter().enumerate() {
             let at = Location::info(i);
-            let dst = info.dst.ok_or_else(|| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800", at, "dstAccelerationStructure is NULL"))?;
+            let dst = info.dst.ok_or_else(|| {
+                Error::vuid(
+                    "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800",
+                    at,
+                    "dstAccelerationStructure is NULL",
+                )
+            })?;
             let obj = self.object(dst).map_err(|_| {
-                Error::vuid("VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800", at, format!("dstAccelerationStructure {:#x} is not a valid handle", dst.0))
+                Error::vuid(
+                    "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03800",
+                    at,
+                    format!(
+                        "dstAccelerationStructure {:#x} is not a valid handle",
+                        dst.0
+                    ),
+                )
             })?;
             for (j, other) in dsts.iter().enumerate() {
                 if other.handle == obj.handle {
@@ -109,7 +142,10 @@ impl Device {
                         format!("the destination is also the destination of info {j}"),
                     ));
                 }
-                if other.buffer.id() == obj.buffer.id() && obj.offset < other.offset + other.size && other.offset < obj.offset + obj.size {
+                if other.buffer.id() == obj.buffer.id()
+                    && obj.offset < other.offset + other.size
+                    && other.offset < obj.offset + obj.size
+                {
                     return Err(Error::vuid(
                         "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03702",
                         at,
@@ -119,11 +155,22 @@ impl Device {
             }
             dsts.push(obj);
         }
-        let overlaps = |a: &AsObject, b: &AsObject| a.buffer.id() == b.buffer.id() && a.offset < b.offset + b.size && b.offset < a.offset + a.size;
+        let overlaps = |a: &AsObject, b: &AsObject| {
+            a.buffer.id() == b.buffer.id()
+                && a.offset < b.offset + b.size
+                && b.offset < a.offset + a.size
+        };
         for (i, info) in infos.iter().enumerate() {
             if let Some(src) = info.src {
                 let src_obj = self.object(src).map_err(|_| {
-                    Error::vuid("VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629", Location::info(i), format!("srcAccelerationStructure {:#x} is not a valid handle", src.0))
+                    Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629",
+                        Location::info(i),
+                        format!(
+                            "srcAccelerationStructure {:#x} is not a valid handle",
+                            src.0
+                        ),
+                    )
                 })?;
                 for (j, d) in dsts.iter().enumerate() {
                     if j != i && d.handle == src.0 {
@@ -133,20 +180,32 @@ impl Device {
                             format!("the source is the destination of info {j}"),
                         ));
                     }
-                    if j != i && info.mode == vk::BuildAccelerationStructureModeKHR::UPDATE && overlaps(d, &src_obj) {
+                    if j != i
+                        && info.mode == vk::BuildAccelerationStructureModeKHR::UPDATE
+                        && overlaps(d, &src_obj)
+                    {
                         return Err(Error::vuid(
                             "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03701",
                             Location::info(j),
-                            format!("the destination's memory overlaps the update source of info {i}"),
+                            format!(
+                                "the destination's memory overlaps the update source of info {i}"
+                            ),
                         ));
                     }
                 }
             }
             // Instances may not reference any destination of this call, nor overlap one.
             for (g, geom) in info.geometries.iter().enumerate() {
-                let crate::input::GeometryData::Instances(data) = &geom.data else { continue };
-                let Some(range) = ranges[i].get(g) else { continue };
-                let Ok(reader) = InstanceReader::new(data, range, Location::info(i).geometry(g)) else { continue };
+                let crate::input::GeometryData::Instances(data) = &geom.data else {
+                    continue;
+                };
+                let Some(range) = ranges[i].get(g) else {
+                    continue;
+                };
+                let Ok(reader) = InstanceReader::new(data, range, Location::info(i).geometry(g))
+                else {
+                    continue;
+                };
                 // Unreadable instances are reported by the per-info pass; stop at the first.
                 for p in 0..reader.primitive_count {
                     let Ok(inst) = reader.instance(p) else { break };
@@ -156,14 +215,20 @@ impl Device {
                     }
                     let at = Location::info(i).geometry(g).primitive(p);
                     if let Some(j) = dsts.iter().position(|d| d.handle == r) {
-                        return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-None-03407", at, format!("instance references {r:#x}, the destination of info {j}")));
+                        return Err(Error::vuid(
+                            "VUID-vkBuildAccelerationStructuresKHR-None-03407",
+                            at,
+                            format!("instance references {r:#x}, the destination of info {j}"),
+                        ));
                     }
                     if let Ok(obj) = self.object(AccelerationStructure(r)) {
                         if let Some(j) = dsts.iter().position(|d| overlaps(d, &obj)) {
                             return Err(Error::vuid(
                                 "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706",
                                 at,
-                                format!("the referenced structure {r:#x} overlaps the destination of info {j}"),
+                                format!(
+                                    "the referenced structure {r:#x} overlaps the destination of info {j}"
+                                ),
                             ));
                         }
                     }
@@ -173,22 +238,39 @@ impl Device {
         for (i, (info, dst)) in infos.iter_mut().zip(&dsts).enumerate() {
             let at = Location::info(i);
             match info.mode {
-                vk::BuildAccelerationStructureModeKHR::BUILD => self.build_one(info, ranges[i], dst, at, &dsts)?,
-                vk::BuildAccelerationStructureModeKHR::UPDATE => self.update_one(info, ranges[i], dst, at, &dsts)?,
+                vk::BuildAccelerationStructureModeKHR::BUILD => {
+                    self.build_one(info, ranges[i], dst, at, &dsts)?
+                }
+                vk::BuildAccelerationStructureModeKHR::UPDATE => {
+                    self.update_one(info, ranges[i], dst, at, &dsts)?
+                }
                 other => {
-                    return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-mode-04628", at, format!("unknown mode {other:?}")));
+                    return Err(Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-mode-04628",
+                        at,
+                        format!("unknown mode {other:?}"),
+                    ));
                 }
             }
         }
         Ok(())
     }
 
-    fn readers<'a>(&self, info: &BuildGeometryInfo<'a>, ranges: &[BuildRangeInfo], at: Location) -> Result<Vec<Reader<'a>>> {
+    fn readers<'a>(
+        &self,
+        info: &BuildGeometryInfo<'a>,
+        ranges: &[BuildRangeInfo],
+        at: Location,
+    ) -> Result<Vec<Reader<'a>>> {
         if ranges.len() != info.geometries.len() {
             return Err(Error::vuid(
                 "VUID-vkBuildAccelerationStructuresKHR-ppBuildRangeInfos-03676",
                 at,
-                format!("{} range infos for {} geometries", ranges.len(), info.geometries.len()),
+                format!(
+                    "{} range infos for {} geometries",
+                    ranges.len(),
+                    info.geometries.len()
+                ),
             ));
         }
         info.geometries
@@ -198,34 +280,65 @@ impl Device {
             .map(|(g, (geom, range))| {
                 let at = at.geometry(g);
                 Ok(match &geom.data {
-                    GeometryData::Triangles(t) => Reader::Triangles(TriangleReader::new(t, range, at)?),
+                    GeometryData::Triangles(t) => {
+                        Reader::Triangles(TriangleReader::new(t, range, at)?)
+                    }
                     GeometryData::Aabbs(a) => Reader::Aabbs(AabbReader::new(a, range, at)?),
-                    GeometryData::Instances(d) => Reader::Instances(InstanceReader::new(d, range, at)?),
+                    GeometryData::Instances(d) => {
+                        Reader::Instances(InstanceReader::new(d, range, at)?)
+                    }
                 })
             })
             .collect()
     }
 
-    fn check_dst_type(info: &BuildGeometryInfo, kind: Kind, dst: &AsObject, at: Location) -> Result<()> {
+    fn check_dst_type(
+        info: &BuildGeometryInfo,
+        kind: Kind,
+        dst: &AsObject,
+        at: Location,
+    ) -> Result<()> {
         let ok = dst.ty == vk::AccelerationStructureTypeKHR::GENERIC
             || (kind == Kind::TopLevel && dst.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL)
-            || (kind == Kind::BottomLevel && dst.ty == vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL);
+            || (kind == Kind::BottomLevel
+                && dst.ty == vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL);
         if !ok {
-            let vuid = if kind == Kind::TopLevel { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03699" } else { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03700" };
-            return Err(Error::vuid(vuid, at, format!("destination was created as {:?}, the build is {:?}", dst.ty, info.ty)));
+            let vuid = if kind == Kind::TopLevel {
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03699"
+            } else {
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03700"
+            };
+            return Err(Error::vuid(
+                vuid,
+                at,
+                format!(
+                    "destination was created as {:?}, the build is {:?}",
+                    dst.ty, info.ty
+                ),
+            ));
         }
         Ok(())
     }
 
-    fn geometry_records(info: &BuildGeometryInfo, ranges: &[BuildRangeInfo]) -> Vec<GeometryRecord> {
+    fn geometry_records(
+        info: &BuildGeometryInfo,
+        ranges: &[BuildRangeInfo],
+    ) -> Vec<GeometryRecord> {
         let mut first = 0u32;
         info.geometries
             .iter()
             .zip(ranges)
             .map(|(g, r)| {
                 let (vertex_format, index_type, max_vertex, extra) = match &g.data {
-                    GeometryData::Triangles(t) => (t.vertex_format.as_raw() as u32, t.index_type.as_raw() as u32, t.max_vertex, t.transform_data.is_some() as u32),
-                    GeometryData::Instances(crate::input::InstancesData::Pointers(_)) => (0, 0, 0, 2),
+                    GeometryData::Triangles(t) => (
+                        t.vertex_format.as_raw() as u32,
+                        t.index_type.as_raw() as u32,
+                        t.max_vertex,
+                        t.transform_data.is_some() as u32,
+                    ),
+                    GeometryData::Instances(crate::input::InstancesData::Pointers(_)) => {
+                        (0, 0, 0, 2)
+                    }
                     _ => (0, 0, 0, 0),
                 };
                 let rec = GeometryRecord {
@@ -237,7 +350,11 @@ impl Device {
                     index_type,
                     max_vertex,
                     extra,
-                    first_vertex: if index_type == vk::IndexType::NONE_KHR.as_raw() as u32 { 0 } else { r.first_vertex },
+                    first_vertex: if index_type == vk::IndexType::NONE_KHR.as_raw() as u32 {
+                        0
+                    } else {
+                        r.first_vertex
+                    },
                     reserved: [0; 3],
                 };
                 first = first.saturating_add(r.primitive_count);
@@ -247,7 +364,11 @@ impl Device {
     }
 
     fn header_flags(info: &BuildGeometryInfo) -> u32 {
-        let opaque = info.geometries.iter().filter(|g| g.flags.contains(vk::GeometryFlagsKHR::OPAQUE)).count();
+        let opaque = info
+            .geometries
+            .iter()
+            .filter(|g| g.flags.contains(vk::GeometryFlagsKHR::OPAQUE))
+            .count();
         if opaque == info.geometries.len() {
             HEADER_ALL_OPAQUE
         } else if opaque == 0 {
@@ -260,19 +381,43 @@ impl Device {
     /// Reads each instance's BLAS: the root bounds, after checking the reference (VUID-03779).
     fn instance_bounds(&self, inst: &Instance, dsts: &[AsObject], at: Location) -> Result<Aabb> {
         let r = inst.acceleration_structure_reference;
-        let bad = |msg: String| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03779", at, msg);
+        let bad = |msg: String| {
+            Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03779",
+                at,
+                msg,
+            )
+        };
         let obj = self.object(AccelerationStructure(r)).map_err(|_| bad(format!("accelerationStructureReference {r:#x} is not an acceleration structure of this device")))?;
         if obj.buffer.memory().is_none() {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03724", at, format!("the buffer of referenced structure {r:#x} has no memory bound")));
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03724",
+                at,
+                format!("the buffer of referenced structure {r:#x} has no memory bound"),
+            ));
         }
         if dsts.iter().any(|d| d.handle == r) {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-None-03407", at, format!("instance references {r:#x}, a destination of this call")));
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-None-03407",
+                at,
+                format!("instance references {r:#x}, a destination of this call"),
+            ));
         }
         let header = self
-            .with_bytes(AccelerationStructure(r), |b| view::read_header(b).map_err(|reason| Error::NotBuilt { handle: r, reason }))
-            .map_err(|e| bad(format!("accelerationStructureReference {r:#x} is not a built structure: {e}")))?;
-        if header.kind != Kind::BottomLevel as u32 || obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL {
-            return Err(bad(format!("accelerationStructureReference {r:#x} is not a bottom-level structure")));
+            .with_bytes(AccelerationStructure(r), |b| {
+                view::read_header(b).map_err(|reason| Error::NotBuilt { handle: r, reason })
+            })
+            .map_err(|e| {
+                bad(format!(
+                    "accelerationStructureReference {r:#x} is not a built structure: {e}"
+                ))
+            })?;
+        if header.kind != Kind::BottomLevel as u32
+            || obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL
+        {
+            return Err(bad(format!(
+                "accelerationStructureReference {r:#x} is not a bottom-level structure"
+            )));
         }
         Ok(if header.stored_count == 0 {
             // A degenerate instance: treated as a point at the instance origin.
@@ -284,7 +429,11 @@ impl Device {
 
     fn instance_record(inst: &Instance, id: u32, at: Location) -> Result<InstanceRecord> {
         let inv = inst.transform.inverse().ok_or_else(|| {
-            Error::vuid("VUID-VkTransformMatrixKHR-matrix-03799", at, "the instance transform's first three columns are not invertible")
+            Error::vuid(
+                "VUID-VkTransformMatrixKHR-matrix-03799",
+                at,
+                "the instance transform's first three columns are not invertible",
+            )
         })?;
         Ok(InstanceRecord {
             object_to_world: inst.transform.to_rows(),
@@ -295,22 +444,42 @@ impl Device {
             mask: inst.mask as u32,
             sbt_record_offset: inst.sbt_record_offset,
             flags: inst.flags.as_raw(),
-            hints: if inst.transform == Affine::IDENTITY { crate::layout::INSTANCE_IDENTITY } else { 0 },
+            hints: if inst.transform == Affine::IDENTITY {
+                crate::layout::INSTANCE_IDENTITY
+            } else {
+                0
+            },
         })
     }
 
-    fn build_one(&self, info: &mut BuildGeometryInfo, ranges: &[BuildRangeInfo], dst: &AsObject, at: Location, dsts: &[AsObject]) -> Result<()> {
+    fn build_one(
+        &self,
+        info: &mut BuildGeometryInfo,
+        ranges: &[BuildRangeInfo],
+        dst: &AsObject,
+        at: Location,
+        dsts: &[AsObject],
+    ) -> Result<()> {
         let (kind, prim_kind) = validate::info(info, at)?;
         Self::check_dst_type(info, kind, dst, at)?;
         let readers = self.readers(info, ranges, at)?;
         let total: u64 = ranges.iter().map(|r| r.primitive_count as u64).sum();
-        validate::counts(kind, prim_kind, total, at, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03801")?;
+        validate::counts(
+            kind,
+            prim_kind,
+            total,
+            at,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03801",
+        )?;
         let plan = Plan::new(prim_kind, info.geometries.len() as u64, total);
         if dst.size < plan.total_size {
             return Err(Error::vuid(
                 "VUID-vkBuildAccelerationStructuresKHR-pInfos-03675",
                 at,
-                format!("destination size {} is smaller than the build size {}", dst.size, plan.total_size),
+                format!(
+                    "destination size {} is smaller than the build size {}",
+                    dst.size, plan.total_size
+                ),
             ));
         }
         let need = build_scratch_size(prim_kind, total);
@@ -322,17 +491,29 @@ impl Device {
             return Err(Error::vuid(
                 "VUID-vkBuildAccelerationStructuresKHR-pInfos-03725",
                 at,
-                format!("scratch holds {} bytes, the build needs {need}", scratch.len()),
+                format!(
+                    "scratch holds {} bytes, the build needs {need}",
+                    scratch.len()
+                ),
             ));
         }
         let n = total as usize;
-        let Scratch { refs, aux, keys, keys_tmp, data } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
+        let Scratch {
+            refs,
+            aux,
+            keys,
+            keys_tmp,
+            data,
+        } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
 
         // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
         let stored = match prim_kind {
             PrimKind::Instances => {
-                let Some(Reader::Instances(r)) = readers.first() else { return Err(Error::NotSupported("instances without a reader".into())) };
-                let out: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(data).map_err(|e| Error::NotSupported(format!("scratch carve: {e}")))?;
+                let Some(Reader::Instances(r)) = readers.first() else {
+                    return Err(Error::NotSupported("instances without a reader".into()));
+                };
+                let out: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(data)
+                    .map_err(|e| Error::NotSupported(format!("scratch carve: {e}")))?;
                 let mut stored = 0usize;
                 for i in 0..r.primitive_count {
                     let at = at.geometry(0).primitive(i);
@@ -347,12 +528,20 @@ impl Device {
                 }
                 stored
             }
-            PrimKind::Triangles | PrimKind::Aabbs => decode_geometries(&readers, &records, refs, data)?,
+            PrimKind::Triangles | PrimKind::Aabbs => {
+                decode_geometries(&readers, &records, refs, data)?
+            }
             PrimKind::None => 0,
         };
         let preset = Preset::from_flags(flags);
         let refs = &mut refs[..stored];
-        let tree = build::build(&preset, refs, &mut aux[..stored], &mut keys[..stored], &mut keys_tmp[..stored]);
+        let tree = build::build(
+            &preset,
+            refs,
+            &mut aux[..stored],
+            &mut keys[..stored],
+            &mut keys_tmp[..stored],
+        );
 
         let fields = HeaderFields {
             kind: kind as u32,
@@ -371,52 +560,113 @@ impl Device {
         })
     }
 
-    fn update_one(&self, info: &mut BuildGeometryInfo, ranges: &[BuildRangeInfo], dst: &AsObject, at: Location, dsts: &[AsObject]) -> Result<()> {
+    fn update_one(
+        &self,
+        info: &mut BuildGeometryInfo,
+        ranges: &[BuildRangeInfo],
+        dst: &AsObject,
+        at: Location,
+        dsts: &[AsObject],
+    ) -> Result<()> {
         let (kind, prim_kind) = validate::info(info, at)?;
         Self::check_dst_type(info, kind, dst, at)?;
-        let src_handle = info.src.ok_or_else(|| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-04630", at, "mode is UPDATE but srcAccelerationStructure is NULL"))?;
+        let src_handle = info.src.ok_or_else(|| {
+            Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-04630",
+                at,
+                "mode is UPDATE but srcAccelerationStructure is NULL",
+            )
+        })?;
         let src = self.object(src_handle).map_err(|_| {
-            Error::vuid("VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629", at, format!("srcAccelerationStructure {:#x} is not a valid handle", src_handle.0))
+            Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-srcAccelerationStructure-04629",
+                at,
+                format!(
+                    "srcAccelerationStructure {:#x} is not a valid handle",
+                    src_handle.0
+                ),
+            )
         })?;
         if src.buffer.memory().is_none() {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03723", at, "the source's buffer has no memory bound"));
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03723",
+                at,
+                "the source's buffer has no memory bound",
+            ));
         }
-        let src_header = self.header(src_handle).map_err(|e| Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03667", at, format!("source holds no built structure: {e}")))?;
-        if src_header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw() == 0 {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03667", at, "the source was not built with ALLOW_UPDATE"));
+        let src_header = self.header(src_handle).map_err(|e| {
+            Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03667",
+                at,
+                format!("source holds no built structure: {e}"),
+            )
+        })?;
+        if src_header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw()
+            == 0
+        {
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03667",
+                at,
+                "the source was not built with ALLOW_UPDATE",
+            ));
         }
         if src_header.build_flags != info.flags.as_raw() {
             return Err(Error::vuid(
                 "VUID-vkBuildAccelerationStructuresKHR-pInfos-03759",
                 at,
-                format!("flags {:#x} differ from the source's {:#x}", info.flags.as_raw(), src_header.build_flags),
+                format!(
+                    "flags {:#x} differ from the source's {:#x}",
+                    info.flags.as_raw(),
+                    src_header.build_flags
+                ),
             ));
         }
         if src_header.kind != kind as u32 {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03760", at, "type differs from the source's"));
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03760",
+                at,
+                "type differs from the source's",
+            ));
         }
         if src_header.geometry_count as usize != info.geometries.len() {
             return Err(Error::vuid(
                 "VUID-vkBuildAccelerationStructuresKHR-pInfos-03758",
                 at,
-                format!("geometryCount {} differs from the source's {}", info.geometries.len(), src_header.geometry_count),
+                format!(
+                    "geometryCount {} differs from the source's {}",
+                    info.geometries.len(),
+                    src_header.geometry_count
+                ),
             ));
         }
         if dst.handle != src.handle && dst.size < src_header.used_size {
             return Err(Error::vuid(
                 "VUID-vkBuildAccelerationStructuresKHR-pInfos-03675",
                 at,
-                format!("destination size {} is smaller than the source's {}", dst.size, src_header.used_size),
+                format!(
+                    "destination size {} is smaller than the source's {}",
+                    dst.size, src_header.used_size
+                ),
             ));
         }
         let scratch_len = info.scratch.as_deref().map_or(0, |s| s.len()) as u64;
         let need = plan::update_scratch_size(src_header.primitive_count as u64);
         if scratch_len < need {
-            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03726", at, format!("scratch holds {scratch_len} bytes, the update needs {need}")));
+            return Err(Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03726",
+                at,
+                format!("scratch holds {scratch_len} bytes, the update needs {need}"),
+            ));
         }
         let readers = self.readers(info, ranges, at)?;
         let total: u64 = ranges.iter().map(|r| r.primitive_count as u64).sum();
-        validate::counts(kind, prim_kind, total, at, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03801")?;
+        validate::counts(
+            kind,
+            prim_kind,
+            total,
+            at,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03801",
+        )?;
         let records = Self::geometry_records(info, ranges);
         // Instances: decode before locking, to read the referenced BLASes' bounds.
         let mut instance_updates: Vec<(InstanceRecord, Aabb)> = Vec::new();
@@ -439,7 +689,10 @@ impl Device {
                 h.allocated_size = bytes.len() as u64;
                 bytes[..256].copy_from_slice(bytemuck::bytes_of(&h));
             }
-            let view = View::parse(bytes).map_err(|reason| Error::NotBuilt { handle: src.handle, reason })?;
+            let view = View::parse(bytes).map_err(|reason| Error::NotBuilt {
+                handle: src.handle,
+                reason,
+            })?;
             check_update_geometries(view.geometries, &records, at)?;
             let header = *view.header;
             refit(bytes, &header, prim_kind, &readers, &instance_updates, at)
@@ -464,14 +717,20 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scrat
     let r_len = (32 * n).div_ceil(64) * 64;
     let k_len = (8 * n).div_ceil(64) * 64;
     if s.len() < 2 * r_len + 2 * k_len + prim_size * n {
-        return Err(Error::RangeTooShort { what: "scratch", needed: (2 * r_len + 2 * k_len + prim_size * n) as u64, available: s.len() as u64, location: Location::NONE });
+        return Err(Error::RangeTooShort {
+            what: "scratch",
+            needed: (2 * r_len + 2 * k_len + prim_size * n) as u64,
+            available: s.len() as u64,
+            location: Location::NONE,
+        });
     }
     let (r, rest) = s.split_at_mut(r_len);
     let (a, rest) = rest.split_at_mut(r_len);
     let (k, rest) = rest.split_at_mut(k_len);
     let (kt, rest) = rest.split_at_mut(k_len);
     let data = &mut rest[..prim_size * n];
-    let cast_err = |e: bytemuck::PodCastError| Error::NotSupported(format!("scratch alignment: {e}"));
+    let cast_err =
+        |e: bytemuck::PodCastError| Error::NotSupported(format!("scratch alignment: {e}"));
     Ok(Scratch {
         refs: bytemuck::try_cast_slice_mut(&mut r[..32 * n]).map_err(cast_err)?,
         aux: bytemuck::try_cast_slice_mut(&mut a[..32 * n]).map_err(cast_err)?,
@@ -484,7 +743,12 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scrat
 /// Decodes all triangles or AABBs into `data` (indexed by sequence number) and writes a
 /// `PrimRef` per active primitive into `refs`; returns how many are active. Parallel over
 /// chunks; the first error in primitive order is reported.
-fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut [PrimRef], data: &mut [u8]) -> Result<usize> {
+fn decode_geometries(
+    readers: &[Reader],
+    records: &[GeometryRecord],
+    refs: &mut [PrimRef],
+    data: &mut [u8],
+) -> Result<usize> {
     const CHUNK: usize = 4096;
     let mut stored = 0usize;
     for (reader, rec) in readers.iter().zip(records) {
@@ -507,7 +771,10 @@ fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut 
                             let f = match t.triangle_fast(i) {
                                 Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
                                 _ => match t.triangle(i)? {
-                                    Some(v) => [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]],
+                                    Some(v) => [
+                                        v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2],
+                                        v[2][0], v[2][1], v[2][2],
+                                    ],
                                     None => [f32::NAN; 9],
                                 },
                             };
@@ -531,7 +798,8 @@ fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut 
         }
         // Pass 2: references for the active primitives, in order.
         for (i, p) in geom_data.chunks_exact(size).enumerate() {
-            let f = |k: usize| f32::from_le_bytes([p[4 * k], p[4 * k + 1], p[4 * k + 2], p[4 * k + 3]]);
+            let f =
+                |k: usize| f32::from_le_bytes([p[4 * k], p[4 * k + 1], p[4 * k + 2], p[4 * k + 3]]);
             if f(0).is_nan() {
                 continue;
             }
@@ -541,7 +809,10 @@ fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut 
                 b.grow([f(6), f(7), f(8)]);
                 b
             } else {
-                Aabb { lo: [f(0), f(1), f(2)], hi: [f(3), f(4), f(5)] }
+                Aabb {
+                    lo: [f(0), f(1), f(2)],
+                    hi: [f(3), f(4), f(5)],
+                }
             };
             refs[stored] = PrimRef::new(&b, (first + i) as u32);
             stored += 1;
@@ -551,39 +822,101 @@ fn decode_geometries(readers: &[Reader], records: &[GeometryRecord], refs: &mut 
 }
 
 /// Writes the primitive sections in the tree's final order.
-fn write_prims(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, refs: &[PrimRef], data: &[u8]) -> Result<()> {
+fn write_prims(
+    bytes: &mut [u8],
+    h: &Header,
+    prim_kind: PrimKind,
+    refs: &[PrimRef],
+    data: &[u8],
+) -> Result<()> {
     let size = prim_kind.prim_size() as usize;
     let n = refs.len();
     let (head, ids_part) = bytes.split_at_mut(h.prim_ids_offset as usize);
-    let ids: &mut [u32] = bytemuck::try_cast_slice_mut(&mut ids_part[..4 * n]).map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
-    ids.par_iter_mut().zip(refs.par_iter()).with_min_len(4096).for_each(|(o, r)| *o = r.id);
+    let ids: &mut [u32] = bytemuck::try_cast_slice_mut(&mut ids_part[..4 * n])
+        .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+    ids.par_iter_mut()
+        .zip(refs.par_iter())
+        .with_min_len(4096)
+        .for_each(|(o, r)| *o = r.id);
     let prims = &mut head[h.prims_offset as usize..h.prims_offset as usize + size * n];
     if size > 0 {
-        prims.par_chunks_mut(size).zip(refs.par_iter()).with_min_len(1024).for_each(|(out, r)| {
-            let at = r.id as usize * size;
-            out.copy_from_slice(&data[at..at + size]);
-        });
+        prims
+            .par_chunks_mut(size)
+            .zip(refs.par_iter())
+            .with_min_len(1024)
+            .for_each(|(out, r)| {
+                let at = r.id as usize * size;
+                out.copy_from_slice(&data[at..at + size]);
+            });
     }
     Ok(())
 }
 
-fn check_update_geometries(old: &[GeometryRecord], new: &[GeometryRecord], at: Location) -> Result<()> {
+fn check_update_geometries(
+    old: &[GeometryRecord],
+    new: &[GeometryRecord],
+    at: Location,
+) -> Result<()> {
     for (g, (o, n)) in old.iter().zip(new).enumerate() {
         let at = at.geometry(g);
         let rule = |cond: bool, vuid: &'static str, what: &str| {
-            if cond { Ok(()) } else { Err(Error::vuid(vuid, at, format!("{what} differs from the source's"))) }
+            if cond {
+                Ok(())
+            } else {
+                Err(Error::vuid(
+                    vuid,
+                    at,
+                    format!("{what} differs from the source's"),
+                ))
+            }
         };
-        rule(o.geometry_type == n.geometry_type, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03761", "geometryType")?;
-        rule(o.flags == n.flags, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03762", "geometry flags")?;
-        rule(o.vertex_format == n.vertex_format, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03763", "vertexFormat")?;
-        rule(o.max_vertex == n.max_vertex, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03764", "maxVertex")?;
-        rule(o.index_type == n.index_type, "VUID-vkBuildAccelerationStructuresKHR-pInfos-03765", "indexType")?;
+        rule(
+            o.geometry_type == n.geometry_type,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03761",
+            "geometryType",
+        )?;
+        rule(
+            o.flags == n.flags,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03762",
+            "geometry flags",
+        )?;
+        rule(
+            o.vertex_format == n.vertex_format,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03763",
+            "vertexFormat",
+        )?;
+        rule(
+            o.max_vertex == n.max_vertex,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03764",
+            "maxVertex",
+        )?;
+        rule(
+            o.index_type == n.index_type,
+            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03765",
+            "indexType",
+        )?;
         if o.extra & 1 != n.extra & 1 {
-            let vuid = if o.extra & 1 == 0 { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03766" } else { "VUID-vkBuildAccelerationStructuresKHR-pInfos-03767" };
-            return Err(Error::vuid(vuid, at, "transformData NULL-ness differs from the source's"));
+            let vuid = if o.extra & 1 == 0 {
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03766"
+            } else {
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03767"
+            };
+            return Err(Error::vuid(
+                vuid,
+                at,
+                "transformData NULL-ness differs from the source's",
+            ));
         }
-        rule(o.primitive_count == n.primitive_count, "VUID-vkBuildAccelerationStructuresKHR-primitiveCount-03769", "primitiveCount")?;
-        rule(o.first_vertex == n.first_vertex, "VUID-vkBuildAccelerationStructuresKHR-firstVertex-03770", "firstVertex (indexed triangles)")?;
+        rule(
+            o.primitive_count == n.primitive_count,
+            "VUID-vkBuildAccelerationStructuresKHR-primitiveCount-03769",
+            "primitiveCount",
+        )?;
+        rule(
+            o.first_vertex == n.first_vertex,
+            "VUID-vkBuildAccelerationStructuresKHR-firstVertex-03770",
+            "firstVertex (indexed triangles)",
+        )?;
     }
     Ok(())
 }
@@ -591,12 +924,27 @@ fn check_update_geometries(old: &[GeometryRecord], new: &[GeometryRecord], at: L
 /// Update: re-reads every primitive (index values included: the CTS changes them), rewrites
 /// the stored primitives, and refits the nodes bottom-up (children come after parents in the
 /// depth-first order, so one reverse pass suffices).
-fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], instances: &[(InstanceRecord, Aabb)], at: Location) -> Result<()> {
+fn refit(
+    bytes: &mut [u8],
+    h: &Header,
+    prim_kind: PrimKind,
+    readers: &[Reader],
+    instances: &[(InstanceRecord, Aabb)],
+    at: Location,
+) -> Result<()> {
     let n = h.stored_count as usize;
-    let geoms: Vec<GeometryRecord> = bytemuck::pod_collect_to_vec(&bytes[h.geometries_offset as usize..h.geometries_offset as usize + crate::layout::GEOMETRY_RECORD_SIZE as usize * h.geometry_count as usize]);
-    let ids: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[h.prim_ids_offset as usize..h.prim_ids_offset as usize + 4 * n]);
+    let geoms: Vec<GeometryRecord> = bytemuck::pod_collect_to_vec(
+        &bytes[h.geometries_offset as usize
+            ..h.geometries_offset as usize
+                + crate::layout::GEOMETRY_RECORD_SIZE as usize * h.geometry_count as usize],
+    );
+    let ids: Vec<u32> = bytemuck::pod_collect_to_vec(
+        &bytes[h.prim_ids_offset as usize..h.prim_ids_offset as usize + 4 * n],
+    );
     let locate = |id: u32| {
-        let g = geoms.partition_point(|r| r.first_primitive <= id).saturating_sub(1);
+        let g = geoms
+            .partition_point(|r| r.first_primitive <= id)
+            .saturating_sub(1);
         (g, id - geoms[g].first_primitive)
     };
     // New bounds per stored primitive.
@@ -625,7 +973,11 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
                             Reader::Instances(_) => false,
                         };
                         if active {
-                            return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663", at.geometry(g).primitive(i), "an inactive primitive became active in an update"));
+                            return Err(Error::vuid(
+                                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
+                                at.geometry(g).primitive(i),
+                                "an inactive primitive became active in an update",
+                            ));
                         }
                     }
                 }
@@ -634,32 +986,43 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
             // in primitive order whatever the thread count.
             const CHUNK: usize = 2048;
             let one = |out: &mut [u8], b: &mut Aabb, id: u32| -> Result<()> {
-                    let (g, p) = locate(id);
-                    let at = at.geometry(g).primitive(p);
-                    let inactive = || Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at, "an active primitive became inactive in an update");
-                    match &readers[g] {
-                        Reader::Triangles(t) => {
-                            let f = match t.triangle_fast(p) {
-                                Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
-                                _ => {
-                                    let v = t.triangle(p)?.ok_or_else(inactive)?;
-                                    [v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2]]
-                                }
-                            };
-                            out.copy_from_slice(bytemuck::cast_slice(&f));
-                            let mut bb = Aabb::point([f[0], f[1], f[2]]);
-                            bb.grow([f[3], f[4], f[5]]);
-                            bb.grow([f[6], f[7], f[8]]);
-                            *b = bb;
-                        }
-                        Reader::Aabbs(a) => {
-                            let bb = a.aabb(p)?.ok_or_else(inactive)?;
-                            out.copy_from_slice(bytemuck::cast_slice(&[bb.lo[0], bb.lo[1], bb.lo[2], bb.hi[0], bb.hi[1], bb.hi[2]]));
-                            *b = bb;
-                        }
-                        Reader::Instances(_) => {}
+                let (g, p) = locate(id);
+                let at = at.geometry(g).primitive(p);
+                let inactive = || {
+                    Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03664",
+                        at,
+                        "an active primitive became inactive in an update",
+                    )
+                };
+                match &readers[g] {
+                    Reader::Triangles(t) => {
+                        let f = match t.triangle_fast(p) {
+                            Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+                            _ => {
+                                let v = t.triangle(p)?.ok_or_else(inactive)?;
+                                [
+                                    v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0],
+                                    v[2][1], v[2][2],
+                                ]
+                            }
+                        };
+                        out.copy_from_slice(bytemuck::cast_slice(&f));
+                        let mut bb = Aabb::point([f[0], f[1], f[2]]);
+                        bb.grow([f[3], f[4], f[5]]);
+                        bb.grow([f[6], f[7], f[8]]);
+                        *b = bb;
                     }
-                    Ok(())
+                    Reader::Aabbs(a) => {
+                        let bb = a.aabb(p)?.ok_or_else(inactive)?;
+                        out.copy_from_slice(bytemuck::cast_slice(&[
+                            bb.lo[0], bb.lo[1], bb.lo[2], bb.hi[0], bb.hi[1], bb.hi[2],
+                        ]));
+                        *b = bb;
+                    }
+                    Reader::Instances(_) => {}
+                }
+                Ok(())
             };
             let results: Vec<Result<()>> = prims
                 .par_chunks_mut(size * CHUNK)
@@ -686,25 +1049,37 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
                 }
             }
             let mut used = vec![false; instances.len()];
-            let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(prims).map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+            let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(prims)
+                .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
             for (slot, rec) in recs.iter_mut().enumerate() {
                 let id = ids[slot];
                 let Some(k) = by_id.get(id as usize).copied().flatten() else {
-                    return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03664", at.geometry(0).primitive(id), "an active instance became inactive in an update"));
+                    return Err(Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03664",
+                        at.geometry(0).primitive(id),
+                        "an active instance became inactive in an update",
+                    ));
                 };
                 used[k] = true;
                 *rec = instances[k].0;
                 bounds[slot] = instances[k].1;
             }
             if let Some(k) = used.iter().position(|u| !u) {
-                return Err(Error::vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03663", at.geometry(0).primitive(instances[k].0.instance_id), "an inactive instance became active in an update"));
+                return Err(Error::vuid(
+                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
+                    at.geometry(0).primitive(instances[k].0.instance_id),
+                    "an inactive instance became active in an update",
+                ));
             }
         }
         PrimKind::None => {}
     }
     // Refit: leaves from primitive bounds, inner children from their node's children.
-    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut bytes[h.nodes_offset as usize..h.nodes_offset as usize + crate::layout::NODE_SIZE as usize * h.node_count as usize])
-        .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(
+        &mut bytes[h.nodes_offset as usize
+            ..h.nodes_offset as usize + crate::layout::NODE_SIZE as usize * h.node_count as usize],
+    )
+    .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
     let mut root = Aabb::EMPTY;
     for i in (0..nodes.len()).rev() {
         for k in 0..crate::layout::WIDTH {
@@ -715,10 +1090,14 @@ fn refit(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader], 
             let b = if c & LEAF_BIT != 0 {
                 let first = (c & !LEAF_BIT) as usize;
                 let count = nodes[i].count[k] as usize;
-                bounds[first..first + count].iter().fold(Aabb::EMPTY, |a, b| a.union(b))
+                bounds[first..first + count]
+                    .iter()
+                    .fold(Aabb::EMPTY, |a, b| a.union(b))
             } else {
                 let child = &nodes[c as usize];
-                (0..crate::layout::WIDTH).filter(|&j| child.child[j] != EMPTY_CHILD).fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
+                (0..crate::layout::WIDTH)
+                    .filter(|&j| child.child[j] != EMPTY_CHILD)
+                    .fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
             };
             nodes[i].set_bounds(k, &b);
             if i == 0 {

@@ -34,7 +34,12 @@ pub struct SerializedHeader {
 impl SerializedHeader {
     /// Parses the header and handle list of serialized data from any implementation.
     pub fn parse(bytes: &[u8]) -> Result<SerializedHeader> {
-        let short = |needed: u64| Error::RangeTooShort { what: "serialized data", needed, available: bytes.len() as u64, location: Location::NONE };
+        let short = |needed: u64| Error::RangeTooShort {
+            what: "serialized data",
+            needed,
+            available: bytes.len() as u64,
+            location: Location::NONE,
+        };
         if (bytes.len() as u64) < SERIALIZED_HEADER_SIZE {
             return Err(short(SERIALIZED_HEADER_SIZE));
         }
@@ -44,7 +49,10 @@ impl SerializedHeader {
         // carries no plain handle list.
         let plain = handle_count >> 32 == 0;
         let n = if plain { handle_count } else { 0 };
-        let end = n.checked_mul(8).and_then(|h| h.checked_add(SERIALIZED_HEADER_SIZE)).ok_or_else(|| short(u64::MAX))?;
+        let end = n
+            .checked_mul(8)
+            .and_then(|h| h.checked_add(SERIALIZED_HEADER_SIZE))
+            .ok_or_else(|| short(u64::MAX))?;
         if end > bytes.len() as u64 {
             return Err(short(end));
         }
@@ -81,45 +89,105 @@ fn patch_allocated(bytes: &mut [u8], allocated: u64) {
 }
 
 impl Device {
-    fn constructed(&self, a: AccelerationStructure, vuid: &'static str) -> Result<(AsObject, Header)> {
+    fn constructed(
+        &self,
+        a: AccelerationStructure,
+        vuid: &'static str,
+    ) -> Result<(AsObject, Header)> {
         let obj = self.object(a)?;
-        let header = self.with_bytes(a, |b| View::parse(b).map(|v| *v.header).map_err(|reason| Error::vuid(vuid, Location::NONE, format!("{:#x} holds no built structure: {reason}", a.0))))?;
+        let header = self.with_bytes(a, |b| {
+            View::parse(b).map(|v| *v.header).map_err(|reason| {
+                Error::vuid(
+                    vuid,
+                    Location::NONE,
+                    format!("{:#x} holds no built structure: {reason}", a.0),
+                )
+            })
+        })?;
         Ok((obj, header))
     }
 
     /// `vkCopyAccelerationStructureKHR` with mode `CLONE` or `COMPACT`.
     #[doc(alias = "vkCopyAccelerationStructureKHR")]
-    pub fn copy_acceleration_structure(&self, src: AccelerationStructure, dst: AccelerationStructure, mode: vk::CopyAccelerationStructureModeKHR) -> Result<()> {
+    pub fn copy_acceleration_structure(
+        &self,
+        src: AccelerationStructure,
+        dst: AccelerationStructure,
+        mode: vk::CopyAccelerationStructureModeKHR,
+    ) -> Result<()> {
         let at = Location::NONE;
-        let (src_obj, h) = self.constructed(src, "VUID-VkCopyAccelerationStructureInfoKHR-src-11586")?;
+        let (src_obj, h) =
+            self.constructed(src, "VUID-VkCopyAccelerationStructureInfoKHR-src-11586")?;
         let dst_obj = self.object(dst)?;
         match mode {
             vk::CopyAccelerationStructureModeKHR::CLONE => {}
             vk::CopyAccelerationStructureModeKHR::COMPACT => {
-                if h.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw() == 0 {
-                    return Err(Error::vuid("VUID-VkCopyAccelerationStructureInfoKHR-src-03411", at, "COMPACT needs a source built with ALLOW_COMPACTION"));
+                if h.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw()
+                    == 0
+                {
+                    return Err(Error::vuid(
+                        "VUID-VkCopyAccelerationStructureInfoKHR-src-03411",
+                        at,
+                        "COMPACT needs a source built with ALLOW_COMPACTION",
+                    ));
                 }
             }
             other => {
-                return Err(Error::vuid("VUID-VkCopyAccelerationStructureInfoKHR-mode-03410", at, format!("mode {other:?} is not CLONE or COMPACT")));
+                return Err(Error::vuid(
+                    "VUID-VkCopyAccelerationStructureInfoKHR-mode-03410",
+                    at,
+                    format!("mode {other:?} is not CLONE or COMPACT"),
+                ));
             }
         }
         if src_obj.handle == dst_obj.handle
-            || (src_obj.buffer.id() == dst_obj.buffer.id() && src_obj.offset < dst_obj.offset + dst_obj.size && dst_obj.offset < src_obj.offset + src_obj.size)
+            || (src_obj.buffer.id() == dst_obj.buffer.id()
+                && src_obj.offset < dst_obj.offset + dst_obj.size
+                && dst_obj.offset < src_obj.offset + src_obj.size)
         {
-            return Err(Error::vuid("VUID-VkCopyAccelerationStructureInfoKHR-dst-07791", at, "source and destination memory overlap"));
+            return Err(Error::vuid(
+                "VUID-VkCopyAccelerationStructureInfoKHR-dst-07791",
+                at,
+                "source and destination memory overlap",
+            ));
         }
-        let kind_ok = dst_obj.ty == vk::AccelerationStructureTypeKHR::GENERIC || (dst_obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL) == (h.kind == Kind::TopLevel as u32);
+        let kind_ok = dst_obj.ty == vk::AccelerationStructureTypeKHR::GENERIC
+            || (dst_obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL)
+                == (h.kind == Kind::TopLevel as u32);
         if !kind_ok {
-            return Err(Error::vuid("VUID-VkCopyAccelerationStructureInfoKHR-src-04963", at, format!("destination type {:?} differs from the source's", dst_obj.ty)));
+            return Err(Error::vuid(
+                "VUID-VkCopyAccelerationStructureInfoKHR-src-04963",
+                at,
+                format!(
+                    "destination type {:?} differs from the source's",
+                    dst_obj.ty
+                ),
+            ));
         }
         if dst_obj.size < h.used_size {
-            let vuid = if mode == vk::CopyAccelerationStructureModeKHR::CLONE { "VUID-VkCopyAccelerationStructureInfoKHR-mode-12418" } else { "VUID-VkCopyAccelerationStructureInfoKHR-mode-12419" };
-            return Err(Error::vuid(vuid, at, format!("destination size {} is smaller than the needed {}", dst_obj.size, h.used_size)));
+            let vuid = if mode == vk::CopyAccelerationStructureModeKHR::CLONE {
+                "VUID-VkCopyAccelerationStructureInfoKHR-mode-12418"
+            } else {
+                "VUID-VkCopyAccelerationStructureInfoKHR-mode-12419"
+            };
+            return Err(Error::vuid(
+                vuid,
+                at,
+                format!(
+                    "destination size {} is smaller than the needed {}",
+                    dst_obj.size, h.used_size
+                ),
+            ));
         }
         self.with_dst_src(&dst_obj, Some(&src_obj), at, |d, s| {
             let used = h.used_size as usize;
-            let s = s.ok_or_else(|| Error::vuid("VUID-VkCopyAccelerationStructureInfoKHR-dst-07791", at, "source and destination are the same"))?;
+            let s = s.ok_or_else(|| {
+                Error::vuid(
+                    "VUID-VkCopyAccelerationStructureInfoKHR-dst-07791",
+                    at,
+                    "source and destination are the same",
+                )
+            })?;
             d[..used].copy_from_slice(&s[..used]);
             patch_allocated(d, d.len() as u64);
             Ok(())
@@ -129,21 +197,44 @@ impl Device {
     /// `vkCopyAccelerationStructureToMemoryKHR` (mode `SERIALIZE`): writes the spec header,
     /// the handle list and the structure into `dst`; returns the bytes written.
     #[doc(alias = "vkCopyAccelerationStructureToMemoryKHR")]
-    pub fn copy_acceleration_structure_to_memory(&self, src: AccelerationStructure, dst: &mut [u8], mode: vk::CopyAccelerationStructureModeKHR) -> Result<u64> {
+    pub fn copy_acceleration_structure_to_memory(
+        &self,
+        src: AccelerationStructure,
+        dst: &mut [u8],
+        mode: vk::CopyAccelerationStructureModeKHR,
+    ) -> Result<u64> {
         let at = Location::NONE;
         if mode != vk::CopyAccelerationStructureModeKHR::SERIALIZE {
-            return Err(Error::vuid("VUID-VkCopyAccelerationStructureToMemoryInfoKHR-mode-03412", at, format!("mode {mode:?} is not SERIALIZE")));
+            return Err(Error::vuid(
+                "VUID-VkCopyAccelerationStructureToMemoryInfoKHR-mode-03412",
+                at,
+                format!("mode {mode:?} is not SERIALIZE"),
+            ));
         }
         if dst.as_ptr() as usize % 16 != 0 {
-            return Err(Error::vuid("VUID-vkCopyAccelerationStructureToMemoryKHR-pInfo-03751", at, "dst.hostAddress is not aligned to 16 bytes"));
+            return Err(Error::vuid(
+                "VUID-vkCopyAccelerationStructureToMemoryKHR-pInfo-03751",
+                at,
+                "dst.hostAddress is not aligned to 16 bytes",
+            ));
         }
         self.with_bytes(src, |bytes| {
-            let v = View::parse(bytes).map_err(|reason| Error::vuid("VUID-VkCopyAccelerationStructureToMemoryInfoKHR-src-04959", at, format!("source holds no built structure: {reason}")))?;
+            let v = View::parse(bytes).map_err(|reason| {
+                Error::vuid(
+                    "VUID-VkCopyAccelerationStructureToMemoryInfoKHR-src-04959",
+                    at,
+                    format!("source holds no built structure: {reason}"),
+                )
+            })?;
             let handles = handle_list(&v);
             let used = v.header.used_size;
             let total = SERIALIZED_HEADER_SIZE + 8 * handles.len() as u64 + used;
             if (dst.len() as u64) < total {
-                return Err(Error::vuid("VUID-VkCopyAccelerationStructureToMemoryInfoKHR-dst-03561", at, format!("dst holds {} bytes, serialization needs {total}", dst.len())));
+                return Err(Error::vuid(
+                    "VUID-VkCopyAccelerationStructureToMemoryInfoKHR-dst-03561",
+                    at,
+                    format!("dst holds {} bytes, serialization needs {total}", dst.len()),
+                ));
             }
             dst[0..16].copy_from_slice(&DRIVER_UUID);
             dst[16..32].copy_from_slice(&COMPATIBILITY_UUID);
@@ -165,59 +256,126 @@ impl Device {
     /// `vkCopyMemoryToAccelerationStructureKHR` (mode `DESERIALIZE`). `src` is untrusted: it is
     /// validated completely before anything is written.
     #[doc(alias = "vkCopyMemoryToAccelerationStructureKHR")]
-    pub fn copy_memory_to_acceleration_structure(&self, src: &[u8], dst: AccelerationStructure, mode: vk::CopyAccelerationStructureModeKHR) -> Result<()> {
+    pub fn copy_memory_to_acceleration_structure(
+        &self,
+        src: &[u8],
+        dst: AccelerationStructure,
+        mode: vk::CopyAccelerationStructureModeKHR,
+    ) -> Result<()> {
         let at = Location::NONE;
         if mode != vk::CopyAccelerationStructureModeKHR::DESERIALIZE {
-            return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-mode-03413", at, format!("mode {mode:?} is not DESERIALIZE")));
+            return Err(Error::vuid(
+                "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-mode-03413",
+                at,
+                format!("mode {mode:?} is not DESERIALIZE"),
+            ));
         }
         if src.as_ptr() as usize % 16 != 0 {
-            return Err(Error::vuid("VUID-vkCopyMemoryToAccelerationStructureKHR-pInfo-03750", at, "src.hostAddress is not aligned to 16 bytes"));
+            return Err(Error::vuid(
+                "VUID-vkCopyMemoryToAccelerationStructureKHR-pInfo-03750",
+                at,
+                "src.hostAddress is not aligned to 16 bytes",
+            ));
         }
         let header = SerializedHeader::parse(src)?;
         let mut version = [0u8; 32];
         version[..16].copy_from_slice(&header.driver_uuid);
         version[16..].copy_from_slice(&header.compatibility_uuid);
         if self.compatibility(&version) != vk::AccelerationStructureCompatibilityKHR::COMPATIBLE {
-            return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414", at, "the data was serialized by an incompatible implementation or layout version"));
+            return Err(Error::vuid(
+                "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414",
+                at,
+                "the data was serialized by an incompatible implementation or layout version",
+            ));
         }
         let start = SERIALIZED_HEADER_SIZE + 8 * header.handles.len() as u64;
-        let payload_end = start.checked_add(header.deserialized_size).filter(|&e| e <= src.len() as u64 && e <= header.serialized_size);
+        let payload_end = start
+            .checked_add(header.deserialized_size)
+            .filter(|&e| e <= src.len() as u64 && e <= header.serialized_size);
         let Some(payload_end) = payload_end else {
-            return Err(Error::RangeTooShort { what: "serialized data", needed: start.saturating_add(header.deserialized_size), available: src.len() as u64, location: at });
+            return Err(Error::RangeTooShort {
+                what: "serialized data",
+                needed: start.saturating_add(header.deserialized_size),
+                available: src.len() as u64,
+                location: at,
+            });
         };
         let payload = &src[start as usize..payload_end as usize];
         // Validate a copy with the alignment the typed view needs.
         let staged = crate::memory::aligned_copy(payload);
         let check = |b: &[u8]| -> Result<(Header, PrimKind)> {
-            let v = View::parse(b).map_err(|reason| Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414", at, format!("invalid structure data: {reason}")))?;
+            let v = View::parse(b).map_err(|reason| {
+                Error::vuid(
+                    "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414",
+                    at,
+                    format!("invalid structure data: {reason}"),
+                )
+            })?;
             if v.header.used_size != header.deserialized_size {
-                return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414", at, "deserialized size disagrees with the structure"));
+                return Err(Error::vuid(
+                    "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414",
+                    at,
+                    "deserialized size disagrees with the structure",
+                ));
             }
-            if v.header.kind == Kind::TopLevel as u32 && header.handles.len() != v.header.primitive_count as usize {
-                return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414", at, "handle count differs from the instance count"));
+            if v.header.kind == Kind::TopLevel as u32
+                && header.handles.len() != v.header.primitive_count as usize
+            {
+                return Err(Error::vuid(
+                    "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414",
+                    at,
+                    "handle count differs from the instance count",
+                ));
             }
             if v.header.kind == Kind::BottomLevel as u32 && header.handle_count != 0 {
-                return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414", at, "a bottom-level structure carries no handles"));
+                return Err(Error::vuid(
+                    "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-pInfo-03414",
+                    at,
+                    "a bottom-level structure carries no handles",
+                ));
             }
             Ok((*v.header, v.prim_kind))
         };
         let (h, prim_kind) = check(&bytemuck::cast_slice::<_, u8>(&staged)[..payload.len()])?;
         let dst_obj = self.object(dst)?;
-        let ty_ok = dst_obj.ty == vk::AccelerationStructureTypeKHR::GENERIC || (dst_obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL) == (h.kind == Kind::TopLevel as u32);
+        let ty_ok = dst_obj.ty == vk::AccelerationStructureTypeKHR::GENERIC
+            || (dst_obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL)
+                == (h.kind == Kind::TopLevel as u32);
         if !ty_ok {
-            return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-dst-03746", at, format!("destination type {:?} differs from the serialized type", dst_obj.ty)));
+            return Err(Error::vuid(
+                "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-dst-03746",
+                at,
+                format!(
+                    "destination type {:?} differs from the serialized type",
+                    dst_obj.ty
+                ),
+            ));
         }
         if dst_obj.size < header.deserialized_size {
-            return Err(Error::vuid("VUID-VkCopyMemoryToAccelerationStructureInfoKHR-dst-03746", at, format!("destination size {} is smaller than the deserialized size {}", dst_obj.size, header.deserialized_size)));
+            return Err(Error::vuid(
+                "VUID-VkCopyMemoryToAccelerationStructureInfoKHR-dst-03746",
+                at,
+                format!(
+                    "destination size {} is smaller than the deserialized size {}",
+                    dst_obj.size, header.deserialized_size
+                ),
+            ));
         }
         self.with_dst_src(&dst_obj, None, at, |d, _| {
             d[..payload.len()].copy_from_slice(payload);
             patch_allocated(d, d.len() as u64);
             if prim_kind == PrimKind::Instances {
-                let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(&mut d[h.prims_offset as usize..h.prims_offset as usize + 128 * h.stored_count as usize])
-                    .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
+                let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(
+                    &mut d[h.prims_offset as usize
+                        ..h.prims_offset as usize + 128 * h.stored_count as usize],
+                )
+                .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
                 for r in recs {
-                    r.acceleration_structure_reference = header.handles.get(r.instance_id as usize).copied().unwrap_or(0);
+                    r.acceleration_structure_reference = header
+                        .handles
+                        .get(r.instance_id as usize)
+                        .copied()
+                        .unwrap_or(0);
                 }
             }
             Ok(())
@@ -227,26 +385,64 @@ impl Device {
     /// `vkWriteAccelerationStructuresPropertiesKHR`: one `VkDeviceSize` per structure at
     /// `data[i * stride..]`.
     #[doc(alias = "vkWriteAccelerationStructuresPropertiesKHR")]
-    pub fn write_acceleration_structures_properties(&self, structures: &[AccelerationStructure], query_type: vk::QueryType, data: &mut [u8], stride: usize) -> Result<()> {
+    pub fn write_acceleration_structures_properties(
+        &self,
+        structures: &[AccelerationStructure],
+        query_type: vk::QueryType,
+        data: &mut [u8],
+        stride: usize,
+    ) -> Result<()> {
         let at = Location::NONE;
         let stride_vuid = match query_type {
-            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR => "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-03448",
-            vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR => "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-03450",
-            vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR => "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-06731",
-            vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_BOTTOM_LEVEL_POINTERS_KHR => "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-06733",
+            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR => {
+                "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-03448"
+            }
+            vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR => {
+                "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-03450"
+            }
+            vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR => {
+                "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-06731"
+            }
+            vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_BOTTOM_LEVEL_POINTERS_KHR => {
+                "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-06733"
+            }
             other => {
-                return Err(Error::vuid("VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-06742", at, format!("query type {other:?} is not an acceleration-structure property")));
+                return Err(Error::vuid(
+                    "VUID-vkWriteAccelerationStructuresPropertiesKHR-queryType-06742",
+                    at,
+                    format!("query type {other:?} is not an acceleration-structure property"),
+                ));
             }
         };
         if stride % 8 != 0 {
-            return Err(Error::vuid(stride_vuid, at, format!("stride {stride} is not a multiple of 8")));
+            return Err(Error::vuid(
+                stride_vuid,
+                at,
+                format!("stride {stride} is not a multiple of 8"),
+            ));
         }
         if structures.is_empty() {
-            return Err(Error::vuid("VUID-vkWriteAccelerationStructuresPropertiesKHR-accelerationStructureCount-arraylength", at, "accelerationStructureCount must be greater than 0"));
+            return Err(Error::vuid(
+                "VUID-vkWriteAccelerationStructuresPropertiesKHR-accelerationStructureCount-arraylength",
+                at,
+                "accelerationStructureCount must be greater than 0",
+            ));
         }
-        let fits = structures.len().checked_mul(stride).is_some_and(|n| n <= data.len()) && (structures.len() - 1) * stride + 8 <= data.len();
+        let fits = structures
+            .len()
+            .checked_mul(stride)
+            .is_some_and(|n| n <= data.len())
+            && (structures.len() - 1) * stride + 8 <= data.len();
         if !fits {
-            return Err(Error::vuid("VUID-vkWriteAccelerationStructuresPropertiesKHR-dataSize-03452", at, format!("dataSize {} is less than count * stride ({} * {stride})", data.len(), structures.len())));
+            return Err(Error::vuid(
+                "VUID-vkWriteAccelerationStructuresPropertiesKHR-dataSize-03452",
+                at,
+                format!(
+                    "dataSize {} is less than count * stride ({} * {stride})",
+                    data.len(),
+                    structures.len()
+                ),
+            ));
         }
         let mut values = Vec::with_capacity(structures.len());
         for (i, s) in structures.iter().enumerate() {
@@ -276,7 +472,11 @@ impl Device {
     }
 
     /// One property of one structure (see [`Device::write_acceleration_structures_properties`]).
-    pub fn acceleration_structure_property(&self, a: AccelerationStructure, query_type: vk::QueryType) -> Result<u64> {
+    pub fn acceleration_structure_property(
+        &self,
+        a: AccelerationStructure,
+        query_type: vk::QueryType,
+    ) -> Result<u64> {
         let mut out = [0u8; 8];
         self.write_acceleration_structures_properties(&[a], query_type, &mut out, 8)?;
         Ok(u64::from_le_bytes(out))
@@ -284,10 +484,17 @@ impl Device {
 
     /// Serializes into a new, 16-byte aligned buffer; returns the bytes.
     pub fn serialize(&self, a: AccelerationStructure) -> Result<Vec<u8>> {
-        let size = self.acceleration_structure_property(a, vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR)?;
+        let size = self.acceleration_structure_property(
+            a,
+            vk::QueryType::ACCELERATION_STRUCTURE_SERIALIZATION_SIZE_KHR,
+        )?;
         let mut words = vec![0u128; (size as usize).div_ceil(16)];
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut words);
-        let n = self.copy_acceleration_structure_to_memory(a, bytes, vk::CopyAccelerationStructureModeKHR::SERIALIZE)?;
+        let n = self.copy_acceleration_structure_to_memory(
+            a,
+            bytes,
+            vk::CopyAccelerationStructureModeKHR::SERIALIZE,
+        )?;
         Ok(bytes[..n as usize].to_vec())
     }
 
@@ -299,7 +506,10 @@ impl Device {
         let header = SerializedHeader::parse(bytes)?;
         // Untrusted sizes: nothing is allocated for more than the data actually holds.
         let start = SERIALIZED_HEADER_SIZE + 8 * header.handles.len() as u64;
-        if start.checked_add(header.deserialized_size).is_none_or(|end| end > bytes.len() as u64) {
+        if start
+            .checked_add(header.deserialized_size)
+            .is_none_or(|end| end > bytes.len() as u64)
+        {
             return Err(Error::RangeTooShort {
                 what: "serialized data",
                 needed: start.saturating_add(header.deserialized_size),
@@ -312,8 +522,14 @@ impl Device {
         aligned[..bytes.len()].copy_from_slice(bytes);
         let aligned = &aligned[..bytes.len()];
         let ty = vk::AccelerationStructureTypeKHR::GENERIC;
-        let dst = self.create_acceleration_structure(&crate::AccelerationStructureCreateInfo::new(ty, header.deserialized_size.max(1)))?;
-        if let Err(e) = self.copy_memory_to_acceleration_structure(aligned, dst, vk::CopyAccelerationStructureModeKHR::DESERIALIZE) {
+        let dst = self.create_acceleration_structure(
+            &crate::AccelerationStructureCreateInfo::new(ty, header.deserialized_size.max(1)),
+        )?;
+        if let Err(e) = self.copy_memory_to_acceleration_structure(
+            aligned,
+            dst,
+            vk::CopyAccelerationStructureModeKHR::DESERIALIZE,
+        ) {
             let _ = self.destroy_acceleration_structure(dst);
             return Err(e);
         }

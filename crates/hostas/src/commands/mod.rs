@@ -22,26 +22,40 @@ impl Device {
         at: crate::error::Location,
         f: impl FnOnce(&mut [u8], Option<&[u8]>) -> Result<R>,
     ) -> Result<R> {
-        let dmem = dst.buffer.memory().ok_or_else(|| Error::vuid(
-            "VUID-vkBuildAccelerationStructuresKHR-pInfos-03722",
-            at,
-            format!("the buffer of acceleration structure {:#x} has no memory bound", dst.handle),
-        ))?;
+        let dmem = dst.buffer.memory().ok_or_else(|| {
+            Error::vuid(
+                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03722",
+                at,
+                format!(
+                    "the buffer of acceleration structure {:#x} has no memory bound",
+                    dst.handle
+                ),
+            )
+        })?;
         let src = src.filter(|s| s.handle != dst.handle);
         match src {
             None => {
-                let mut g = dmem.try_write().ok_or(Error::InUse { handle: dst.handle })?;
+                let mut g = dmem
+                    .try_write()
+                    .ok_or(Error::InUse { handle: dst.handle })?;
                 let range = dst.offset as usize..(dst.offset + dst.size) as usize;
                 f(&mut g.bytes_mut()[range], None)
             }
             Some(s) => {
-                let smem = s.buffer.memory().ok_or_else(|| Error::vuid(
-                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03723",
-                    at,
-                    format!("the buffer of acceleration structure {:#x} has no memory bound", s.handle),
-                ))?;
+                let smem = s.buffer.memory().ok_or_else(|| {
+                    Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03723",
+                        at,
+                        format!(
+                            "the buffer of acceleration structure {:#x} has no memory bound",
+                            s.handle
+                        ),
+                    )
+                })?;
                 if std::sync::Arc::ptr_eq(&dmem, &smem) {
-                    let mut g = dmem.try_write().ok_or(Error::InUse { handle: dst.handle })?;
+                    let mut g = dmem
+                        .try_write()
+                        .ok_or(Error::InUse { handle: dst.handle })?;
                     let bytes = g.bytes_mut();
                     let (d0, d1) = (dst.offset as usize, (dst.offset + dst.size) as usize);
                     let (s0, s1) = (s.offset as usize, (s.offset + s.size) as usize);
@@ -61,8 +75,13 @@ impl Device {
                     }
                 } else {
                     let sg = smem.try_read().ok_or(Error::InUse { handle: s.handle })?;
-                    let mut dg = dmem.try_write().ok_or(Error::InUse { handle: dst.handle })?;
-                    f(&mut dg.bytes_mut()[dst.offset as usize..(dst.offset + dst.size) as usize], Some(&sg.bytes()[s.offset as usize..(s.offset + s.size) as usize]))
+                    let mut dg = dmem
+                        .try_write()
+                        .ok_or(Error::InUse { handle: dst.handle })?;
+                    f(
+                        &mut dg.bytes_mut()[dst.offset as usize..(dst.offset + dst.size) as usize],
+                        Some(&sg.bytes()[s.offset as usize..(s.offset + s.size) as usize]),
+                    )
                 }
             }
         }

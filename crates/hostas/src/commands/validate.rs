@@ -6,14 +6,15 @@ use crate::layout::{Kind, PrimKind};
 use ash::vk;
 
 /// Flags hostas implements; others belong to extensions it does not expose.
-const SUPPORTED_FLAGS: vk::BuildAccelerationStructureFlagsKHR = vk::BuildAccelerationStructureFlagsKHR::from_raw(
-    vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw()
-        | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw()
-        | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE.as_raw()
-        | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD.as_raw()
-        | vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY.as_raw()
-        | vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw(),
-);
+const SUPPORTED_FLAGS: vk::BuildAccelerationStructureFlagsKHR =
+    vk::BuildAccelerationStructureFlagsKHR::from_raw(
+        vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw()
+            | vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw()
+            | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE.as_raw()
+            | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD.as_raw()
+            | vk::BuildAccelerationStructureFlagsKHR::LOW_MEMORY.as_raw()
+            | vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw(),
+    );
 
 /// Checks the rules that hold for any use of a build info; returns what it builds.
 pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, PrimKind)> {
@@ -21,14 +22,25 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
         vk::AccelerationStructureTypeKHR::TOP_LEVEL => Kind::TopLevel,
         vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL => Kind::BottomLevel,
         vk::AccelerationStructureTypeKHR::GENERIC => {
-            return Err(Error::vuid("VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03654", at, "type must not be GENERIC"));
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03654",
+                at,
+                "type must not be GENERIC",
+            ));
         }
         other => {
-            return Err(Error::vuid("VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-parameter", at, format!("unknown type {other:?}")));
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-parameter",
+                at,
+                format!("unknown type {other:?}"),
+            ));
         }
     };
     let f = info.flags;
-    if f.contains(vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD) {
+    if f.contains(
+        vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE
+            | vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_BUILD,
+    ) {
         return Err(Error::vuid(
             "VUID-VkAccelerationStructureBuildGeometryInfoKHR-flags-03796",
             at,
@@ -40,16 +52,23 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
         return Err(Error::vuid(
             "VUID-VkAccelerationStructureBuildGeometryInfoKHR-flags-parameter",
             at,
-            format!("flags {unsupported:#x} belong to extensions hostas does not support (motion blur, micromaps, clusters)"),
+            format!(
+                "flags {unsupported:#x} belong to extensions hostas does not support (motion blur, micromaps, clusters)"
+            ),
         ));
     }
     let g = info.geometries;
     let mut prim_kind = PrimKind::None;
     for (gi, geom) in g.iter().enumerate() {
         let at = at.geometry(gi);
-        let valid_flags = vk::GeometryFlagsKHR::OPAQUE | vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION;
+        let valid_flags =
+            vk::GeometryFlagsKHR::OPAQUE | vk::GeometryFlagsKHR::NO_DUPLICATE_ANY_HIT_INVOCATION;
         if !valid_flags.contains(geom.flags) {
-            return Err(Error::vuid("VUID-VkAccelerationStructureGeometryKHR-flags-parameter", at, format!("unknown geometry flags {:#x}", geom.flags.as_raw())));
+            return Err(Error::vuid(
+                "VUID-VkAccelerationStructureGeometryKHR-flags-parameter",
+                at,
+                format!("unknown geometry flags {:#x}", geom.flags.as_raw()),
+            ));
         }
         let k = match geom.data {
             GeometryData::Triangles(t) => {
@@ -57,7 +76,11 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
                 // check the rest against the data and the ranges.
                 let probe = crate::input::TrianglesData {
                     transform_data: None,
-                    index_data: if t.index_type == vk::IndexType::NONE_KHR { None } else { Some(&[]) },
+                    index_data: if t.index_type == vk::IndexType::NONE_KHR {
+                        None
+                    } else {
+                        Some(&[])
+                    },
                     ..t
                 };
                 crate::input::triangles::TriangleReader::new(&probe, &Default::default(), at)?;
@@ -99,7 +122,10 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
         return Err(Error::vuid(
             "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03790",
             at,
-            format!("a top-level build must have exactly one geometry, not {}", g.len()),
+            format!(
+                "a top-level build must have exactly one geometry, not {}",
+                g.len()
+            ),
         ));
     }
     if g.len() as u64 > crate::device::PROPERTIES.max_geometry_count {
@@ -113,19 +139,40 @@ pub(crate) fn info(info: &BuildGeometryInfo, at: Location) -> Result<(Kind, Prim
 }
 
 /// Checks the primitive totals against the device limits.
-pub(crate) fn counts(kind: Kind, prim_kind: PrimKind, total: u64, at: Location, vuid_instances: &'static str) -> Result<()> {
+pub(crate) fn counts(
+    kind: Kind,
+    prim_kind: PrimKind,
+    total: u64,
+    at: Location,
+    vuid_instances: &'static str,
+) -> Result<()> {
     let p = crate::device::PROPERTIES;
     match (kind, prim_kind) {
-        (Kind::TopLevel, _) if total > p.max_instance_count => Err(Error::vuid(vuid_instances, at, format!("{total} instances exceed maxInstanceCount {}", p.max_instance_count))),
-        (Kind::BottomLevel, PrimKind::Triangles) if total > p.max_primitive_count => Err(Error::vuid(
-            "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03795",
+        (Kind::TopLevel, _) if total > p.max_instance_count => Err(Error::vuid(
+            vuid_instances,
             at,
-            format!("{total} triangles exceed maxPrimitiveCount {}", p.max_primitive_count),
+            format!(
+                "{total} instances exceed maxInstanceCount {}",
+                p.max_instance_count
+            ),
         )),
+        (Kind::BottomLevel, PrimKind::Triangles) if total > p.max_primitive_count => {
+            Err(Error::vuid(
+                "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03795",
+                at,
+                format!(
+                    "{total} triangles exceed maxPrimitiveCount {}",
+                    p.max_primitive_count
+                ),
+            ))
+        }
         (Kind::BottomLevel, PrimKind::Aabbs) if total > p.max_primitive_count => Err(Error::vuid(
             "VUID-VkAccelerationStructureBuildGeometryInfoKHR-type-03794",
             at,
-            format!("{total} AABBs exceed maxPrimitiveCount {}", p.max_primitive_count),
+            format!(
+                "{total} AABBs exceed maxPrimitiveCount {}",
+                p.max_primitive_count
+            ),
         )),
         _ => Ok(()),
     }

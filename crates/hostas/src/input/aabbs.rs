@@ -33,10 +33,18 @@ impl<'a> AabbReader<'a> {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03659",
                 location,
-                format!("primitiveOffset {} is not a multiple of 8", range.primitive_offset),
+                format!(
+                    "primitiveOffset {} is not a multiple of 8",
+                    range.primitive_offset
+                ),
             ));
         }
-        Ok(AabbReader { data: *data, primitive_offset: range.primitive_offset as u64, primitive_count: range.primitive_count, location })
+        Ok(AabbReader {
+            data: *data,
+            primitive_offset: range.primitive_offset as u64,
+            primitive_count: range.primitive_count,
+            location,
+        })
     }
 
     /// Box `i`, or `None` when it is inactive (`minX` is NaN).
@@ -66,10 +74,17 @@ impl<'a> AabbReader<'a> {
                 return Err(Error::vuid(
                     VUIDS[k],
                     self.location.primitive(i),
-                    format!("min {} is not less than or equal to max {} on axis {k}", f[k], f[k + 3]),
+                    format!(
+                        "min {} is not less than or equal to max {} on axis {k}",
+                        f[k],
+                        f[k + 3]
+                    ),
                 ));
             }
         }
-        Ok(Some(Aabb { lo: [f[0], f[1], f[2]], hi: [f[3], f[4], f[5]] }))
+        Ok(Some(Aabb {
+            lo: [f[0], f[1], f[2]],
+            hi: [f[3], f[4], f[5]],
+        }))
     }
 }

@@ -63,34 +63,62 @@ pub struct InstanceReader<'a> {
 }
 
 impl<'a> InstanceReader<'a> {
-    pub fn new(data: &InstancesData<'a>, range: &BuildRangeInfo, location: Location) -> Result<Self> {
+    pub fn new(
+        data: &InstancesData<'a>,
+        range: &BuildRangeInfo,
+        location: Location,
+    ) -> Result<Self> {
         if range.primitive_offset % 16 != 0 {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03660",
                 location,
-                format!("primitiveOffset {} is not a multiple of 16", range.primitive_offset),
+                format!(
+                    "primitiveOffset {} is not a multiple of 16",
+                    range.primitive_offset
+                ),
             ));
         }
-        Ok(InstanceReader { data: *data, primitive_offset: range.primitive_offset as u64, primitive_count: range.primitive_count, location })
+        Ok(InstanceReader {
+            data: *data,
+            primitive_offset: range.primitive_offset as u64,
+            primitive_count: range.primitive_count,
+            location,
+        })
     }
 
     /// Instance `i` of the range.
     pub fn instance(&self, i: u32) -> Result<Instance> {
         let location = self.location.primitive(i);
-        let too_short = |what, needed: u64, available: usize| Error::RangeTooShort { what, needed, available: available as u64, location };
+        let too_short = |what, needed: u64, available: usize| Error::RangeTooShort {
+            what,
+            needed,
+            available: available as u64,
+            location,
+        };
         let inst = match self.data {
             InstancesData::Array(bytes) => {
                 let at = self.primitive_offset + 64 * i as u64;
                 let start = usize::try_from(at).unwrap_or(usize::MAX);
-                bytes.get(start..).and_then(Instance::decode).ok_or_else(|| too_short("instances.data", at + 64, bytes.len()))?
+                bytes
+                    .get(start..)
+                    .and_then(Instance::decode)
+                    .ok_or_else(|| too_short("instances.data", at + 64, bytes.len()))?
             }
             InstancesData::Pointers(ptrs) => {
                 let slot = self.primitive_offset / 8 + i as u64;
                 let bytes = usize::try_from(slot)
                     .ok()
                     .and_then(|s| ptrs.get(s))
-                    .ok_or_else(|| too_short("instances.data (array of pointers)", (slot + 1) * 8, ptrs.len() * 8))?;
-                Instance::decode(bytes).ok_or_else(|| too_short("instance pointed to by instances.data", 64, bytes.len()))?
+                    .ok_or_else(|| {
+                        too_short(
+                            "instances.data (array of pointers)",
+                            (slot + 1) * 8,
+                            ptrs.len() * 8,
+                        )
+                    })?;
+                Instance::decode(bytes).ok_or_else(|| {
+                    too_short("instance pointed to by instances.data", 64, bytes.len())
+                })?
             }
         };
         let known = vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE
@@ -101,10 +129,14 @@ impl<'a> InstanceReader<'a> {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureInstanceKHR-flags-parameter",
                 location,
-                format!("instance flags {:#x} include bits of extensions hostas does not support (opacity micromaps)", inst.flags.as_raw()),
+                format!(
+                    "instance flags {:#x} include bits of extensions hostas does not support (opacity micromaps)",
+                    inst.flags.as_raw()
+                ),
             ));
         }
-        let forced = vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
+        let forced = vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE
+            | vk::GeometryInstanceFlagsKHR::FORCE_NO_OPAQUE;
         if inst.flags.contains(forced) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureInstanceKHR-flags-parameter",

@@ -77,13 +77,22 @@ pub struct Geometry<'a> {
 
 impl<'a> Geometry<'a> {
     pub fn triangles(data: TrianglesData<'a>, flags: vk::GeometryFlagsKHR) -> Self {
-        Geometry { data: GeometryData::Triangles(data), flags }
+        Geometry {
+            data: GeometryData::Triangles(data),
+            flags,
+        }
     }
     pub fn aabbs(data: AabbsData<'a>, flags: vk::GeometryFlagsKHR) -> Self {
-        Geometry { data: GeometryData::Aabbs(data), flags }
+        Geometry {
+            data: GeometryData::Aabbs(data),
+            flags,
+        }
     }
     pub fn instances(data: InstancesData<'a>, flags: vk::GeometryFlagsKHR) -> Self {
-        Geometry { data: GeometryData::Instances(data), flags }
+        Geometry {
+            data: GeometryData::Instances(data),
+            flags,
+        }
     }
 }
 

@@ -25,12 +25,19 @@ pub struct TriangleReader<'a> {
 
 impl<'a> TriangleReader<'a> {
     /// Checks the geometry-level rules and reads the transform.
-    pub fn new(data: &TrianglesData<'a>, range: &BuildRangeInfo, location: Location) -> Result<Self> {
+    pub fn new(
+        data: &TrianglesData<'a>,
+        range: &BuildRangeInfo,
+        location: Location,
+    ) -> Result<Self> {
         let format = vertex_format_info(data.vertex_format).ok_or_else(|| {
             Error::vuid(
                 "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexFormat-03797",
                 location,
-                format!("vertexFormat {:?} is not supported for acceleration-structure vertex buffers", data.vertex_format),
+                format!(
+                    "vertexFormat {:?} is not supported for acceleration-structure vertex buffers",
+                    data.vertex_format
+                ),
             )
         })?;
         let index_size = match data.index_type {
@@ -81,7 +88,10 @@ impl<'a> TriangleReader<'a> {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03656",
                 location,
-                format!("primitiveOffset {} is not a multiple of the index size {index_size}", range.primitive_offset),
+                format!(
+                    "primitiveOffset {} is not a multiple of the index size {index_size}",
+                    range.primitive_offset
+                ),
             ));
         }
         if index_size == 0 && primitive_offset % format.offset_alignment() as u64 != 0 {
@@ -103,15 +113,20 @@ impl<'a> TriangleReader<'a> {
                     return Err(Error::vuid(
                         "VUID-VkAccelerationStructureBuildRangeInfoKHR-transformOffset-03658",
                         location,
-                        format!("transformOffset {} is not a multiple of 16", range.transform_offset),
+                        format!(
+                            "transformOffset {} is not a multiple of 16",
+                            range.transform_offset
+                        ),
                     ));
                 }
-                Some(read_transform(bytes, range.transform_offset as u64).ok_or(Error::RangeTooShort {
-                    what: "transformData",
-                    needed: range.transform_offset as u64 + 48,
-                    available: bytes.len() as u64,
-                    location,
-                })?)
+                Some(read_transform(bytes, range.transform_offset as u64).ok_or(
+                    Error::RangeTooShort {
+                        what: "transformData",
+                        needed: range.transform_offset as u64 + 48,
+                        available: bytes.len() as u64,
+                        location,
+                    },
+                )?)
             }
         };
         let first_vertex = range.first_vertex as u64;
@@ -156,7 +171,8 @@ impl<'a> TriangleReader<'a> {
         if self.index_size == 4 {
             let at = (self.primitive_offset + base * 4) as usize;
             if let Some(b) = bytes.get(at..at.saturating_add(12)) {
-                let raw = [0, 4, 8].map(|i| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as u64);
+                let raw = [0, 4, 8]
+                    .map(|i| u32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]) as u64);
                 let out = raw.map(|r| r + self.first_vertex);
                 if out.iter().all(|&o| o <= self.data.max_vertex as u64) {
                     return Ok(out);
@@ -195,7 +211,11 @@ impl<'a> TriangleReader<'a> {
     /// Vertex `v` (firstVertex already added) before the geometry transform.
     #[inline]
     pub fn vertex(&self, v: u64, primitive: u32) -> Result<Vec3> {
-        let base = if self.index_size == 0 { self.primitive_offset } else { 0 };
+        let base = if self.index_size == 0 {
+            self.primitive_offset
+        } else {
+            0
+        };
         let at = base + v * self.data.vertex_stride;
         let start = usize::try_from(at).unwrap_or(usize::MAX);
         // The common format, read directly.
@@ -205,12 +225,16 @@ impl<'a> TriangleReader<'a> {
                 return Ok([f(0), f(4), f(8)]);
             }
         }
-        self.data.vertex_data.get(start..).and_then(|s| self.format.decode(s)).ok_or(Error::RangeTooShort {
-            what: "vertexData",
-            needed: at.saturating_add(self.format.size as u64),
-            available: self.data.vertex_data.len() as u64,
-            location: self.location.primitive(primitive),
-        })
+        self.data
+            .vertex_data
+            .get(start..)
+            .and_then(|s| self.format.decode(s))
+            .ok_or(Error::RangeTooShort {
+                what: "vertexData",
+                needed: at.saturating_add(self.format.size as u64),
+                available: self.data.vertex_data.len() as u64,
+                location: self.location.primitive(primitive),
+            })
     }
 
     /// Triangle `i` as nine floats, for the common layouts (`R32G32B32_SFLOAT` with 32-bit,
@@ -231,18 +255,30 @@ impl<'a> TriangleReader<'a> {
             4 => {
                 let at = self.primitive_offset as usize + base * 4;
                 let b: &[u8; 12] = self.data.index_data?.get(at..at + 12)?.try_into().ok()?;
-                [u32_at(b, 0) as usize + fv, u32_at(b, 4) as usize + fv, u32_at(b, 8) as usize + fv]
+                [
+                    u32_at(b, 0) as usize + fv,
+                    u32_at(b, 4) as usize + fv,
+                    u32_at(b, 8) as usize + fv,
+                ]
             }
             _ => {
                 let at = self.primitive_offset as usize + base * 2;
                 let b: &[u8; 6] = self.data.index_data?.get(at..at + 6)?.try_into().ok()?;
-                [u16::from_le_bytes([b[0], b[1]]) as usize + fv, u16::from_le_bytes([b[2], b[3]]) as usize + fv, u16::from_le_bytes([b[4], b[5]]) as usize + fv]
+                [
+                    u16::from_le_bytes([b[0], b[1]]) as usize + fv,
+                    u16::from_le_bytes([b[2], b[3]]) as usize + fv,
+                    u16::from_le_bytes([b[4], b[5]]) as usize + fv,
+                ]
             }
         };
         if idx[0].max(idx[1]).max(idx[2]) > self.data.max_vertex as usize {
             return None;
         }
-        let start = if self.index_size == 0 { self.primitive_offset as usize } else { 0 };
+        let start = if self.index_size == 0 {
+            self.primitive_offset as usize
+        } else {
+            0
+        };
         let stride = self.data.vertex_stride as usize;
         let mut out = [0f32; 9];
         for k in 0..3 {

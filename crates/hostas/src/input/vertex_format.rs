@@ -43,9 +43,20 @@ const fn info(format: vk::Format, component: Component, components: u32) -> Vert
         Component::F64 => 8,
         Component::Snorm8 | Component::Unorm8 => 1,
     };
-    let size = if matches!(component, Component::Unorm10Packed) { 4 } else { component_size * components };
+    let size = if matches!(component, Component::Unorm10Packed) {
+        4
+    } else {
+        component_size * components
+    };
     let can_be_nan = matches!(component, Component::F16 | Component::F32 | Component::F64);
-    VertexFormatInfo { format, component, components, component_size, size, can_be_nan }
+    VertexFormatInfo {
+        format,
+        component,
+        components,
+        component_size,
+        size,
+        can_be_nan,
+    }
 }
 
 /// Every vertex format hostas accepts: the six the spec makes mandatory, the ten optional ones
@@ -72,13 +83,20 @@ pub const SUPPORTED_VERTEX_FORMATS: &[VertexFormatInfo] = &[
     info(vk::Format::R8G8_UNORM, Component::Unorm8, 2),
     info(vk::Format::R8G8B8_UNORM, Component::Unorm8, 3),
     info(vk::Format::R8G8B8A8_UNORM, Component::Unorm8, 4),
-    info(vk::Format::A2B10G10R10_UNORM_PACK32, Component::Unorm10Packed, 3),
+    info(
+        vk::Format::A2B10G10R10_UNORM_PACK32,
+        Component::Unorm10Packed,
+        3,
+    ),
 ];
 
 /// The format's description, or `None` when it cannot be used as an acceleration-structure
 /// vertex format.
 pub fn vertex_format_info(format: vk::Format) -> Option<VertexFormatInfo> {
-    SUPPORTED_VERTEX_FORMATS.iter().copied().find(|i| i.format == format)
+    SUPPORTED_VERTEX_FORMATS
+        .iter()
+        .copied()
+        .find(|i| i.format == format)
 }
 
 impl VertexFormatInfo {
@@ -101,7 +119,9 @@ impl VertexFormatInfo {
             *o = match self.component {
                 Component::F32 => f32::from_le_bytes([c[0], c[1], c[2], c[3]]),
                 Component::F16 => half::f16::from_le_bytes([c[0], c[1]]).to_f32(),
-                Component::F64 => f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32,
+                Component::F64 => {
+                    f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]) as f32
+                }
                 Component::Snorm8 => (c[0] as i8 as f32 / 127.0).max(-1.0),
                 Component::Snorm16 => (i16::from_le_bytes([c[0], c[1]]) as f32 / 32767.0).max(-1.0),
                 Component::Unorm8 => c[0] as f32 / 255.0,

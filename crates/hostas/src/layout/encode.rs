@@ -3,11 +3,13 @@
 //! Nothing is assumed about the previous contents of the memory.
 
 use super::plan::Plan;
-use super::{WIDTH, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, GeometryRecord};
+use super::{
+    GeometryRecord, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, WIDTH,
+};
 use crate::build::tree::{Child, InnerNode, Tree};
-use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::math::Aabb;
+use rayon::prelude::*;
 
 /// What the header says besides the tree.
 pub struct HeaderFields {
@@ -26,16 +28,36 @@ pub const SAH_PRIM_COST: f32 = 1.0;
 
 /// Writes header, geometries and nodes into `dst` (the whole structure range). Returns the
 /// header written.
-pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[GeometryRecord], tree: &Tree) -> Result<Header> {
+pub fn encode(
+    dst: &mut [u8],
+    plan: &Plan,
+    fields: &HeaderFields,
+    geometries: &[GeometryRecord],
+    tree: &Tree,
+) -> Result<Header> {
     if (dst.len() as u64) < plan.total_size {
-        return Err(Error::RangeTooShort { what: "acceleration structure", needed: plan.total_size, available: dst.len() as u64, location: Default::default() });
+        return Err(Error::RangeTooShort {
+            what: "acceleration structure",
+            needed: plan.total_size,
+            available: dst.len() as u64,
+            location: Default::default(),
+        });
     }
     let allocated_size = dst.len() as u64;
-    let g_bytes = &mut dst[plan.geometries_offset as usize..plan.geometries_offset as usize + super::GEOMETRY_RECORD_SIZE as usize * geometries.len()];
+    let g_bytes = &mut dst[plan.geometries_offset as usize
+        ..plan.geometries_offset as usize
+            + super::GEOMETRY_RECORD_SIZE as usize * geometries.len()];
     g_bytes.copy_from_slice(bytemuck::cast_slice(geometries));
 
-    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(&mut dst[plan.nodes_offset as usize..(plan.nodes_offset + super::NODE_SIZE * plan.node_capacity) as usize])
-        .map_err(|e| Error::NotSupported(format!("acceleration structure memory is not 64-byte aligned ({e})")))?;
+    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(
+        &mut dst[plan.nodes_offset as usize
+            ..(plan.nodes_offset + super::NODE_SIZE * plan.node_capacity) as usize],
+    )
+    .map_err(|e| {
+        Error::NotSupported(format!(
+            "acceleration structure memory is not 64-byte aligned ({e})"
+        ))
+    })?;
 
     let root_area = match &tree.root {
         Some((b, _)) => b.half_area(),
@@ -48,7 +70,10 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
             Child::Inner(inner) => {
                 let count = inner.nodes as usize;
                 if count > nodes.len() {
-                    return Err(Error::OutOfHostMemory(format!("tree needs {count} nodes, the plan has {}", nodes.len())));
+                    return Err(Error::OutOfHostMemory(format!(
+                        "tree needs {count} nodes, the plan has {}",
+                        nodes.len()
+                    )));
                 }
                 let (sah, depth) = w.write(inner, &mut nodes[..count], 0, 1)?;
                 (*b, count as u32, depth, sah + SAH_NODE_COST)
@@ -59,7 +84,9 @@ pub fn encode(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: &[
                 node.set_bounds(0, b);
                 node.child[0] = LEAF_BIT | first;
                 node.count[0] = *count as u8;
-                let slot = nodes.first_mut().ok_or_else(|| Error::OutOfHostMemory("no room for the root node".into()))?;
+                let slot = nodes
+                    .first_mut()
+                    .ok_or_else(|| Error::OutOfHostMemory("no room for the root node".into()))?;
                 *slot = node;
                 (*b, 1, 1, SAH_NODE_COST + SAH_PRIM_COST * *count as f32)
             }
@@ -103,17 +130,31 @@ const PARALLEL_NODES: u32 = 2048;
 
 impl Writer {
     fn rel_area(&self, b: &Aabb) -> f32 {
-        if self.root_area > 0.0 { b.half_area() / self.root_area } else { 1.0 }
+        if self.root_area > 0.0 {
+            b.half_area() / self.root_area
+        } else {
+            1.0
+        }
     }
 
     /// Writes `inner` at `out[0]` and its subtree after it, in depth-first order; `index` is
     /// the global index of `out[0]`. Returns the subtree's SAH contribution (below this node's
     /// own visit) and its depth.
-    fn write(&self, inner: &InnerNode, out: &mut [Node], index: u32, depth: u32) -> Result<(f32, u32)> {
+    fn write(
+        &self,
+        inner: &InnerNode,
+        out: &mut [Node],
+        index: u32,
+        depth: u32,
+    ) -> Result<(f32, u32)> {
         if depth > MAX_DEPTH {
-            return Err(Error::OutOfHostMemory(format!("tree deeper than {MAX_DEPTH}")));
+            return Err(Error::OutOfHostMemory(format!(
+                "tree deeper than {MAX_DEPTH}"
+            )));
         }
-        let (me, mut rest) = out.split_first_mut().ok_or_else(|| Error::OutOfHostMemory("node plan exceeded".into()))?;
+        let (me, mut rest) = out
+            .split_first_mut()
+            .ok_or_else(|| Error::OutOfHostMemory("node plan exceeded".into()))?;
         let mut node = Node::EMPTY;
         let mut sah = 0.0;
         let mut next = index + 1;

@@ -200,7 +200,10 @@ impl Node {
         self.hi_z[k] = b.hi[2];
     }
     pub fn bounds(&self, k: usize) -> Aabb {
-        Aabb { lo: [self.lo_x[k], self.lo_y[k], self.lo_z[k]], hi: [self.hi_x[k], self.hi_y[k], self.hi_z[k]] }
+        Aabb {
+            lo: [self.lo_x[k], self.lo_y[k], self.lo_z[k]],
+            hi: [self.hi_x[k], self.hi_y[k], self.hi_z[k]],
+        }
     }
 }
 

@@ -21,7 +21,9 @@ pub struct Plan {
 /// always filled before its children are considered), so `n` leaves need at most
 /// `(n - 1) / 7` inner nodes; one for the root of an empty or one-leaf tree.
 pub fn max_nodes(n: u64) -> u64 {
-    (n.saturating_sub(1)).div_ceil(super::WIDTH as u64 - 1).max(1)
+    (n.saturating_sub(1))
+        .div_ceil(super::WIDTH as u64 - 1)
+        .max(1)
 }
 
 impl Plan {
@@ -29,12 +31,23 @@ impl Plan {
         // Nodes go last: their count is the only one not known before the build, so the used
         // size (what compaction keeps) ends right after the last node written.
         let geometries_offset = HEADER_SIZE;
-        let prims_offset = align_up(geometries_offset + GEOMETRY_RECORD_SIZE * geometry_count, SECTION_ALIGN);
+        let prims_offset = align_up(
+            geometries_offset + GEOMETRY_RECORD_SIZE * geometry_count,
+            SECTION_ALIGN,
+        );
         let prim_ids_offset = align_up(prims_offset + kind.prim_size() * max_prims, SECTION_ALIGN);
         let nodes_offset = align_up(prim_ids_offset + 4 * max_prims, SECTION_ALIGN);
         let node_capacity = max_nodes(max_prims);
         let total_size = nodes_offset + super::NODE_SIZE * node_capacity;
-        Plan { geometries_offset, nodes_offset, prims_offset, prim_ids_offset, node_capacity, prim_capacity: max_prims, total_size }
+        Plan {
+            geometries_offset,
+            nodes_offset,
+            prims_offset,
+            prim_ids_offset,
+            node_capacity,
+            prim_capacity: max_prims,
+            total_size,
+        }
     }
 }
 

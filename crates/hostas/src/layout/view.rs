@@ -6,8 +6,8 @@
 //! created but never built).
 
 use super::{
-    EMPTY_CHILD, GeometryRecord, HEADER_SIZE, Header, InstanceRecord, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH,
-    MAX_LEAF_SIZE, Node, PrimKind,
+    EMPTY_CHILD, GeometryRecord, HEADER_SIZE, Header, InstanceRecord, LAYOUT_VERSION, LEAF_BIT,
+    MAGIC, MAX_DEPTH, MAX_LEAF_SIZE, Node, PrimKind,
 };
 
 #[derive(Clone, Copy, Debug)]
@@ -22,24 +22,44 @@ pub struct View<'a> {
     pub prim_ids: &'a [u32],
 }
 
-fn section<'a, T: bytemuck::Pod>(bytes: &'a [u8], offset: u64, count: u64, what: &str) -> Result<&'a [T], String> {
+fn section<'a, T: bytemuck::Pod>(
+    bytes: &'a [u8],
+    offset: u64,
+    count: u64,
+    what: &str,
+) -> Result<&'a [T], String> {
     let size = std::mem::size_of::<T>() as u64;
-    let end = count.checked_mul(size).and_then(|s| s.checked_add(offset)).ok_or_else(|| format!("{what} section overflows"))?;
+    let end = count
+        .checked_mul(size)
+        .and_then(|s| s.checked_add(offset))
+        .ok_or_else(|| format!("{what} section overflows"))?;
     if end > bytes.len() as u64 {
-        return Err(format!("{what} section ends at {end}, past the structure's {} bytes", bytes.len()));
+        return Err(format!(
+            "{what} section ends at {end}, past the structure's {} bytes",
+            bytes.len()
+        ));
     }
-    bytemuck::try_cast_slice(&bytes[offset as usize..end as usize]).map_err(|e| format!("{what} section is misaligned: {e}"))
+    bytemuck::try_cast_slice(&bytes[offset as usize..end as usize])
+        .map_err(|e| format!("{what} section is misaligned: {e}"))
 }
 
 /// Reads just the header, unvalidated beyond magic and version.
 pub fn read_header(bytes: &[u8]) -> Result<Header, String> {
-    let raw = bytes.get(..HEADER_SIZE as usize).ok_or_else(|| format!("{} bytes is too short for a header", bytes.len()))?;
+    let raw = bytes
+        .get(..HEADER_SIZE as usize)
+        .ok_or_else(|| format!("{} bytes is too short for a header", bytes.len()))?;
     let header: Header = bytemuck::pod_read_unaligned(raw);
     if header.magic != MAGIC {
-        return Err(format!("no hostas structure (magic {:#010x})", header.magic));
+        return Err(format!(
+            "no hostas structure (magic {:#010x})",
+            header.magic
+        ));
     }
     if header.version != LAYOUT_VERSION {
-        return Err(format!("layout version {} is not {LAYOUT_VERSION}", header.version));
+        return Err(format!(
+            "layout version {} is not {LAYOUT_VERSION}",
+            header.version
+        ));
     }
     Ok(header)
 }
@@ -47,14 +67,16 @@ pub fn read_header(bytes: &[u8]) -> Result<Header, String> {
 /// The header in place (the bytes must be 8-byte aligned, as structure memory is).
 fn header_ref(bytes: &[u8]) -> Result<&Header, String> {
     read_header(bytes)?;
-    bytemuck::try_from_bytes(&bytes[..HEADER_SIZE as usize]).map_err(|e| format!("header is misaligned: {e}"))
+    bytemuck::try_from_bytes(&bytes[..HEADER_SIZE as usize])
+        .map_err(|e| format!("header is misaligned: {e}"))
 }
 
 impl<'a> View<'a> {
     pub fn parse(bytes: &'a [u8]) -> Result<View<'a>, String> {
         let header = header_ref(bytes)?;
         let h = header;
-        let prim_kind = PrimKind::from_raw(h.prim_kind).ok_or_else(|| format!("unknown primitive kind {}", h.prim_kind))?;
+        let prim_kind = PrimKind::from_raw(h.prim_kind)
+            .ok_or_else(|| format!("unknown primitive kind {}", h.prim_kind))?;
         if h.kind > 1 {
             return Err(format!("unknown structure type {}", h.kind));
         }
@@ -62,20 +84,45 @@ impl<'a> View<'a> {
             return Err("structure type and primitive kind disagree".into());
         }
         if h.used_size > bytes.len() as u64 {
-            return Err(format!("used size {} is larger than the {} bytes given", h.used_size, bytes.len()));
+            return Err(format!(
+                "used size {} is larger than the {} bytes given",
+                h.used_size,
+                bytes.len()
+            ));
         }
-        if h.stored_count > h.prim_capacity || h.node_count > h.node_capacity || h.stored_count > h.primitive_count {
+        if h.stored_count > h.prim_capacity
+            || h.node_count > h.node_capacity
+            || h.stored_count > h.primitive_count
+        {
             return Err("counts exceed capacities".into());
         }
         let limits = crate::device::PROPERTIES;
-        let max_prims = if h.kind == 0 { limits.max_instance_count } else { limits.max_primitive_count };
-        if h.primitive_count as u64 > max_prims || h.geometry_count as u64 > limits.max_geometry_count {
-            return Err(format!("{} primitives in {} geometries exceed the device limits", h.primitive_count, h.geometry_count));
+        let max_prims = if h.kind == 0 {
+            limits.max_instance_count
+        } else {
+            limits.max_primitive_count
+        };
+        if h.primitive_count as u64 > max_prims
+            || h.geometry_count as u64 > limits.max_geometry_count
+        {
+            return Err(format!(
+                "{} primitives in {} geometries exceed the device limits",
+                h.primitive_count, h.geometry_count
+            ));
         }
-        let geometries: &[GeometryRecord] = section(bytes, h.geometries_offset, h.geometry_count as u64, "geometry")?;
+        let geometries: &[GeometryRecord] = section(
+            bytes,
+            h.geometries_offset,
+            h.geometry_count as u64,
+            "geometry",
+        )?;
         let nodes: &[Node] = section(bytes, h.nodes_offset, h.node_count as u64, "node")?;
         let stored = h.stored_count as u64;
-        let (mut triangles, mut aabbs, mut instances): (&[[f32; 9]], &[[f32; 6]], &[InstanceRecord]) = (&[], &[], &[]);
+        let (mut triangles, mut aabbs, mut instances): (
+            &[[f32; 9]],
+            &[[f32; 6]],
+            &[InstanceRecord],
+        ) = (&[], &[], &[]);
         match prim_kind {
             PrimKind::Triangles => triangles = section(bytes, h.prims_offset, stored, "triangle")?,
             PrimKind::Aabbs => aabbs = section(bytes, h.prims_offset, stored, "AABB")?,
@@ -100,11 +147,18 @@ impl<'a> View<'a> {
         }
         // Sections follow the header and each other, in the encoder's order, without overlap:
         // a write into one (deserialization rewrites instance references) cannot reach another.
-        let starts = [h.geometries_offset, h.prims_offset, h.prim_ids_offset, h.nodes_offset];
+        let starts = [
+            h.geometries_offset,
+            h.prims_offset,
+            h.prim_ids_offset,
+            h.nodes_offset,
+        ];
         let mut prev_end = HEADER_SIZE;
         for (s, e) in starts.iter().zip(ends) {
             if *s < prev_end || s % super::SECTION_ALIGN != 0 {
-                return Err(format!("section at {s} overlaps the previous one or is misaligned"));
+                return Err(format!(
+                    "section at {s} overlaps the previous one or is misaligned"
+                ));
             }
             prev_end = e;
         }
@@ -120,10 +174,16 @@ impl<'a> View<'a> {
         let mut next = 0u64;
         for (i, g) in geometries.iter().enumerate() {
             if expected_type.is_some_and(|t| g.geometry_type != t.as_raw() as u32) {
-                return Err(format!("geometry {i} has type {} in a structure of {prim_kind:?}", g.geometry_type));
+                return Err(format!(
+                    "geometry {i} has type {} in a structure of {prim_kind:?}",
+                    g.geometry_type
+                ));
             }
             if g.first_primitive as u64 != next {
-                return Err(format!("geometry {i} starts at primitive {} instead of {next}", g.first_primitive));
+                return Err(format!(
+                    "geometry {i} starts at primitive {} instead of {next}",
+                    g.first_primitive
+                ));
             }
             next += g.primitive_count as u64;
         }
@@ -131,7 +191,10 @@ impl<'a> View<'a> {
             return Err("geometry primitive counts do not add up".into());
         }
         let identity = crate::math::Affine::IDENTITY.to_rows();
-        if let Some(i) = instances.iter().position(|r| r.hints & super::INSTANCE_IDENTITY != 0 && (r.object_to_world != identity || r.world_to_object != identity)) {
+        if let Some(i) = instances.iter().position(|r| {
+            r.hints & super::INSTANCE_IDENTITY != 0
+                && (r.object_to_world != identity || r.world_to_object != identity)
+        }) {
             return Err(format!("instance record {i} is marked identity but is not"));
         }
         if let Some(bad) = prim_ids.iter().find(|&&id| id >= h.primitive_count) {
@@ -155,7 +218,9 @@ impl<'a> View<'a> {
                     let first = (c & !LEAF_BIT) as u64;
                     let count = n.count[k] as u64;
                     if count == 0 || count > MAX_LEAF_SIZE as u64 || first + count > stored {
-                        return Err(format!("node {i} child {k}: leaf range {first}+{count} out of range"));
+                        return Err(format!(
+                            "node {i} child {k}: leaf range {first}+{count} out of range"
+                        ));
                     }
                 } else {
                     let c = c as usize;
@@ -172,13 +237,25 @@ impl<'a> View<'a> {
                 }
             }
         }
-        Ok(View { header, prim_kind, geometries, nodes, triangles, aabbs, instances, prim_ids })
+        Ok(View {
+            header,
+            prim_kind,
+            geometries,
+            nodes,
+            triangles,
+            aabbs,
+            instances,
+            prim_ids,
+        })
     }
 
     /// The geometry that holds primitive sequence number `id`, and the primitive's index in it.
     #[inline]
     pub fn locate(&self, id: u32) -> (u32, u32) {
-        let g = self.geometries.partition_point(|g| g.first_primitive <= id).saturating_sub(1);
+        let g = self
+            .geometries
+            .partition_point(|g| g.first_primitive <= id)
+            .saturating_sub(1);
         let first = self.geometries.get(g).map_or(0, |r| r.first_primitive);
         (g as u32, id - first)
     }
@@ -223,7 +300,11 @@ impl<'a> View<'a> {
     pub fn from_parts(bytes: &'a [u8], p: &Parts) -> Option<View<'a>> {
         let header: &Header = bytemuck::try_from_bytes(bytes.get(..HEADER_SIZE as usize)?).ok()?;
         let cast = |r: &std::ops::Range<usize>| bytes.get(r.clone());
-        let (mut triangles, mut aabbs, mut instances): (&[[f32; 9]], &[[f32; 6]], &[InstanceRecord]) = (&[], &[], &[]);
+        let (mut triangles, mut aabbs, mut instances): (
+            &[[f32; 9]],
+            &[[f32; 6]],
+            &[InstanceRecord],
+        ) = (&[], &[], &[]);
         let prims = cast(&p.prims)?;
         match p.prim_kind {
             PrimKind::Triangles => triangles = bytemuck::try_cast_slice(prims).ok()?,

@@ -70,36 +70,69 @@ pub struct Ray {
 
 impl Ray {
     pub fn new(origin: Vec3, direction: Vec3) -> Ray {
-        Ray { origin, t_min: 0.0, direction, t_max: f32::INFINITY, flags: RayFlags::NONE, cull_mask: 0xff }
+        Ray {
+            origin,
+            t_min: 0.0,
+            direction,
+            t_max: f32::INFINITY,
+            flags: RayFlags::NONE,
+            cull_mask: 0xff,
+        }
     }
 
     /// The runtime rules of `OpRayQueryInitializeKHR` (VUID-RuntimeSpirv-OpRayQueryInitializeKHR-*).
     pub fn validate(&self) -> Result<()> {
         let bad = |vuid: &'static str, msg: &str| Err(Error::vuid(vuid, Location::NONE, msg));
-        if !self.origin.iter().all(|v| v.is_finite()) || !self.direction.iter().all(|v| v.is_finite()) {
-            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06348", "ray origin and direction must be finite");
+        if !self.origin.iter().all(|v| v.is_finite())
+            || !self.direction.iter().all(|v| v.is_finite())
+        {
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06348",
+                "ray origin and direction must be finite",
+            );
         }
         if self.t_min.is_nan() || self.t_max.is_nan() {
-            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06351", "tMin and tMax must not be NaN");
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06351",
+                "tMin and tMax must not be NaN",
+            );
         }
         if !(self.t_min >= 0.0 && self.t_max >= 0.0) {
-            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06349", "tMin and tMax must be non-negative");
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06349",
+                "tMin and tMax must be non-negative",
+            );
         }
         if self.t_min > self.t_max {
-            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06350", "tMin must be less than or equal to tMax");
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06350",
+                "tMin must be less than or equal to tMax",
+            );
         }
         let f = self.flags;
         if f.contains(RayFlags::SKIP_TRIANGLES | RayFlags::SKIP_AABBS) {
-            return bad("VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06889", "SkipTriangles and SkipAABBs must not both be set");
+            return bad(
+                "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06889",
+                "SkipTriangles and SkipAABBs must not both be set",
+            );
         }
-        let cull = [RayFlags::SKIP_TRIANGLES, RayFlags::CULL_BACK_FACING_TRIANGLES, RayFlags::CULL_FRONT_FACING_TRIANGLES];
+        let cull = [
+            RayFlags::SKIP_TRIANGLES,
+            RayFlags::CULL_BACK_FACING_TRIANGLES,
+            RayFlags::CULL_FRONT_FACING_TRIANGLES,
+        ];
         if cull.iter().filter(|&&c| f.contains(c)).count() > 1 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06890",
                 "at most one of SkipTriangles, CullBackFacingTriangles and CullFrontFacingTriangles may be set",
             );
         }
-        let opacity = [RayFlags::OPAQUE, RayFlags::NO_OPAQUE, RayFlags::CULL_OPAQUE, RayFlags::CULL_NO_OPAQUE];
+        let opacity = [
+            RayFlags::OPAQUE,
+            RayFlags::NO_OPAQUE,
+            RayFlags::CULL_OPAQUE,
+            RayFlags::CULL_NO_OPAQUE,
+        ];
         if opacity.iter().filter(|&&c| f.contains(c)).count() > 1 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06891",

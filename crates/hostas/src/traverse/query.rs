@@ -11,7 +11,10 @@ use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
 use crate::error::{Error, Location, Result};
 use crate::layout::view::View;
-use crate::layout::{WIDTH, EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind};
+use crate::layout::{
+    EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node,
+    PrimKind, WIDTH,
+};
 use crate::math::{Affine, Vec3, fmax, fmin};
 use ash::vk;
 
@@ -117,7 +120,12 @@ impl Stack {
     fn new() -> Box<Stack> {
         STACK_POOL
             .with(|p| p.borrow_mut().pop())
-            .unwrap_or_else(|| Box::new(Stack { items: [Entry::default(); STACK_CAPACITY], len: 0 }))
+            .unwrap_or_else(|| {
+                Box::new(Stack {
+                    items: [Entry::default(); STACK_CAPACITY],
+                    len: 0,
+                })
+            })
     }
     fn recycle(self: Box<Stack>) {
         STACK_POOL.with(|p| {
@@ -147,7 +155,8 @@ impl Stack {
 
 /// 1 + 2 * gamma(3): widens the slab test's far distance so that rounding never loses a hit
 /// (Ize, "Robust BVH Ray Traversal", JCGT 2013).
-pub(super) const ROBUST_FAR: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(super) const ROBUST_FAR: f32 =
+    1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
 #[derive(Clone, Copy)]
 pub(super) struct BoxRay {
@@ -163,24 +172,49 @@ impl BoxRay {
         // +-inf (never entered), and a ray lying exactly in a slab's plane gives 0 * inf = NaN,
         // which the min/max below drop (the ray is inside that slab, boundaries included).
         let inv = dir.map(|d| 1.0 / d);
-        BoxRay { origin, inv, neg: inv.map(|i| i.is_sign_negative()) }
+        BoxRay {
+            origin,
+            inv,
+            neg: inv.map(|i| i.is_sign_negative()),
+        }
     }
 
     /// Entry distances of the children of `node`; `f32::INFINITY` where the segment
     /// `[t_min, t_max]` misses (inclusive at both ends).
     #[inline(always)]
     pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; WIDTH] {
-        let (nx, fx) = if self.neg[0] { (&n.hi_x, &n.lo_x) } else { (&n.lo_x, &n.hi_x) };
-        let (ny, fy) = if self.neg[1] { (&n.hi_y, &n.lo_y) } else { (&n.lo_y, &n.hi_y) };
-        let (nz, fz) = if self.neg[2] { (&n.hi_z, &n.lo_z) } else { (&n.lo_z, &n.hi_z) };
+        let (nx, fx) = if self.neg[0] {
+            (&n.hi_x, &n.lo_x)
+        } else {
+            (&n.lo_x, &n.hi_x)
+        };
+        let (ny, fy) = if self.neg[1] {
+            (&n.hi_y, &n.lo_y)
+        } else {
+            (&n.lo_y, &n.hi_y)
+        };
+        let (nz, fz) = if self.neg[2] {
+            (&n.hi_z, &n.lo_z)
+        } else {
+            (&n.lo_z, &n.hi_z)
+        };
         let [ox, oy, oz] = self.origin;
         let [ix, iy, iz] = self.inv;
         let mut out = [f32::INFINITY; WIDTH];
         for k in 0..WIDTH {
             // `fmax(a, b)` and `fmin(a, b)` return `b` when `a` is NaN: each axis term goes
             // first, so a NaN from a ray in a slab plane leaves the interval unbounded there.
-            let near = fmax((nx[k] - ox) * ix, fmax((ny[k] - oy) * iy, fmax((nz[k] - oz) * iz, t_min)));
-            let far = fmin((fx[k] - ox) * ix * ROBUST_FAR, fmin((fy[k] - oy) * iy * ROBUST_FAR, fmin((fz[k] - oz) * iz * ROBUST_FAR, t_max)));
+            let near = fmax(
+                (nx[k] - ox) * ix,
+                fmax((ny[k] - oy) * iy, fmax((nz[k] - oz) * iz, t_min)),
+            );
+            let far = fmin(
+                (fx[k] - ox) * ix * ROBUST_FAR,
+                fmin(
+                    (fy[k] - oy) * iy * ROBUST_FAR,
+                    fmin((fz[k] - oz) * iz * ROBUST_FAR, t_max),
+                ),
+            );
             out[k] = if near <= far { near } else { f32::INFINITY };
         }
         out
@@ -192,7 +226,11 @@ impl BoxRay {
         let mut near = t_min;
         let mut far = t_max;
         for k in 0..3 {
-            let (lo, hi) = if self.neg[k] { (b[k + 3], b[k]) } else { (b[k], b[k + 3]) };
+            let (lo, hi) = if self.neg[k] {
+                (b[k + 3], b[k])
+            } else {
+                (b[k], b[k + 3])
+            };
             near = fmax((lo - self.origin[k]) * self.inv[k], near);
             far = fmin((hi - self.origin[k]) * self.inv[k] * ROBUST_FAR, far);
         }
@@ -212,10 +250,20 @@ struct Level<'s> {
 
 impl<'s> Level<'s> {
     fn new(view: View<'s>, ray: BoxRay, stack: Box<Stack>) -> Level<'s> {
-        let mut level = Level { view, ray, stack, leaf_next: 0, leaf_end: 0 };
+        let mut level = Level {
+            view,
+            ray,
+            stack,
+            leaf_next: 0,
+            leaf_end: 0,
+        };
         level.stack.len = 0;
         if !level.view.nodes.is_empty() {
-            level.stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
+            level.stack.push(Entry {
+                child: 0,
+                count: 0,
+                t: f32::NEG_INFINITY,
+            });
         }
         level
     }
@@ -232,7 +280,9 @@ impl<'s> Level<'s> {
                 self.leaf_end = self.leaf_next + e.count;
                 return true;
             }
-            let Some(node) = self.view.nodes.get(e.child as usize) else { continue };
+            let Some(node) = self.view.nodes.get(e.child as usize) else {
+                continue;
+            };
             let t = self.ray.node(node, t_min, t_max);
             // Push hit children farthest first, so the nearest is popped next.
             let mut hits = [Entry::default(); WIDTH];
@@ -240,7 +290,11 @@ impl<'s> Level<'s> {
             for k in 0..WIDTH {
                 if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
                     // Insertion into `hits`, kept in decreasing distance.
-                    let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };
+                    let e = Entry {
+                        child: node.child[k],
+                        count: node.count[k] as u32,
+                        t: t[k],
+                    };
                     let mut j = n;
                     while j > 0 && hits[j - 1].t < e.t {
                         hits[j] = hits[j - 1];
@@ -267,7 +321,14 @@ struct Bottom<'s> {
 
 impl Drop for RayQuery<'_> {
     fn drop(&mut self) {
-        for s in [self.top.take().map(|l| l.stack), self.bottom.take().map(|b| b.level.stack), self.spare_stack.take()].into_iter().flatten() {
+        for s in [
+            self.top.take().map(|l| l.stack),
+            self.bottom.take().map(|b| b.level.stack),
+            self.spare_stack.take(),
+        ]
+        .into_iter()
+        .flatten()
+        {
             s.recycle();
         }
     }
@@ -290,7 +351,9 @@ impl<'s> RayQuery<'s> {
     /// `rayQueryInitializeEXT`.
     pub fn new(scene: &'s Scene, ray: &Ray) -> Result<RayQuery<'s>> {
         ray.validate()?;
-        let top = scene.tlas_view().map(|v| Level::new(v, BoxRay::new(ray.origin, ray.direction), Stack::new()));
+        let top = scene
+            .tlas_view()
+            .map(|v| Level::new(v, BoxRay::new(ray.origin, ray.direction), Stack::new()));
         Ok(RayQuery {
             scene,
             ray: *ray,
@@ -367,7 +430,10 @@ impl<'s> RayQuery<'s> {
             return Err(Error::vuid(
                 "VUID-RuntimeSpirv-OpRayQueryGenerateIntersectionKHR-06353",
                 Location::NONE,
-                format!("hitT {t} is outside [tMin {}, committed t {}]", self.ray.t_min, self.t_max),
+                format!(
+                    "hitT {t} is outside [tMin {}, committed t {}]",
+                    self.ray.t_min, self.t_max
+                ),
             ));
         }
         let mut c = self.candidate;
@@ -401,12 +467,19 @@ impl<'s> RayQuery<'s> {
     }
 
     fn pick(&self, committed: bool) -> Option<&Intersection> {
-        let i = if committed { &self.committed } else { &self.candidate };
+        let i = if committed {
+            &self.committed
+        } else {
+            &self.candidate
+        };
         (i.kind != Kind::None).then_some(i)
     }
 
     fn instance_of(&self, i: &Intersection) -> Option<&'s InstanceRecord> {
-        self.scene.tlas_view()?.instances.get(i.instance_slot as usize)
+        self.scene
+            .tlas_view()?
+            .instances
+            .get(i.instance_slot as usize)
     }
 
     /// `rayQueryGetIntersectionObjectToWorldEXT` (3x4, row-major).
@@ -431,14 +504,23 @@ impl<'s> RayQuery<'s> {
     /// `rayQueryGetIntersectionTriangleVertexPositionsEXT`: the triangle's vertices in object
     /// space after the geometry transform, in index order. Needs `ALLOW_DATA_ACCESS`.
     pub fn triangle_vertex_positions(&self, committed: bool) -> Result<[Vec3; 3]> {
-        let none = || Error::vuid("VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR", Location::NONE, "no triangle intersection");
+        let none = || {
+            Error::vuid(
+                "VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR",
+                Location::NONE,
+                "no triangle intersection",
+            )
+        };
         let i = self.pick(committed).ok_or_else(none)?;
         if !matches!(i.kind, Kind::Triangle) {
             return Err(none());
         }
         self.instance_of(i).ok_or_else(none)?;
         let view = self.scene.blas_view_for(i.instance_slot).ok_or_else(none)?;
-        if view.header.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw() == 0 {
+        if view.header.build_flags
+            & vk::BuildAccelerationStructureFlagsKHR::ALLOW_DATA_ACCESS.as_raw()
+            == 0
+        {
             return Err(Error::vuid(
                 "VUID-RuntimeSpirv-OpRayQueryGetIntersectionTriangleVertexPositionsKHR-08761",
                 Location::NONE,
@@ -459,8 +541,24 @@ impl<'s> RayQuery<'s> {
                     let slot = level.leaf_next;
                     level.leaf_next += 1;
                     let c = match level.view.prim_kind {
-                        PrimKind::Triangles => test_triangle(&self.ray, self.t_max, bottom.instance, bottom.instance_slot, &level.view, &bottom.sheared, slot),
-                        PrimKind::Aabbs => test_aabb(&self.ray, self.t_max, bottom.instance, bottom.instance_slot, &level.view, &level.ray, slot),
+                        PrimKind::Triangles => test_triangle(
+                            &self.ray,
+                            self.t_max,
+                            bottom.instance,
+                            bottom.instance_slot,
+                            &level.view,
+                            &bottom.sheared,
+                            slot,
+                        ),
+                        PrimKind::Aabbs => test_aabb(
+                            &self.ray,
+                            self.t_max,
+                            bottom.instance,
+                            bottom.instance_slot,
+                            &level.view,
+                            &level.ray,
+                            slot,
+                        ),
                         _ => None,
                     };
                     if c.is_some() {
@@ -477,11 +575,15 @@ impl<'s> RayQuery<'s> {
             while top.leaf_next < top.leaf_end {
                 let slot = top.leaf_next;
                 top.leaf_next += 1;
-                let Some(inst) = top.view.instances.get(slot as usize) else { continue };
+                let Some(inst) = top.view.instances.get(slot as usize) else {
+                    continue;
+                };
                 if inst.mask & self.ray.cull_mask & 0xff == 0 {
                     continue;
                 }
-                let Some(view) = self.scene.blas_view_for(slot) else { continue };
+                let Some(view) = self.scene.blas_view_for(slot) else {
+                    continue;
+                };
                 let skip = match view.prim_kind {
                     PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
                     PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
@@ -514,13 +616,20 @@ impl<'s> RayQuery<'s> {
 
 /// Opacity in the spec's order: geometry flag, then instance force flags, then ray flags.
 #[inline(always)]
-pub(super) fn resolve_opacity(view: &View, geometry: u32, instance: &InstanceRecord, ray: RayFlags) -> bool {
+pub(super) fn resolve_opacity(
+    view: &View,
+    geometry: u32,
+    instance: &InstanceRecord,
+    ray: RayFlags,
+) -> bool {
     let mut opaque = if view.header.header_flags & HEADER_ALL_OPAQUE != 0 {
         true
     } else if view.header.header_flags & HEADER_NONE_OPAQUE != 0 {
         false
     } else {
-        view.geometries.get(geometry as usize).is_some_and(|g| g.flags & vk::GeometryFlagsKHR::OPAQUE.as_raw() != 0)
+        view.geometries
+            .get(geometry as usize)
+            .is_some_and(|g| g.flags & vk::GeometryFlagsKHR::OPAQUE.as_raw() != 0)
     };
     let f = vk::GeometryInstanceFlagsKHR::from_raw(instance.flags);
     if f.contains(vk::GeometryInstanceFlagsKHR::FORCE_OPAQUE) {
@@ -538,10 +647,18 @@ pub(super) fn resolve_opacity(view: &View, geometry: u32, instance: &InstanceRec
 
 #[inline(always)]
 pub(super) fn opacity_culled(opaque: bool, ray: RayFlags) -> bool {
-    (opaque && ray.contains(RayFlags::CULL_OPAQUE)) || (!opaque && ray.contains(RayFlags::CULL_NO_OPAQUE))
+    (opaque && ray.contains(RayFlags::CULL_OPAQUE))
+        || (!opaque && ray.contains(RayFlags::CULL_NO_OPAQUE))
 }
 
-fn intersection(instance: &InstanceRecord, instance_slot: u32, view: &View, slot: u32, kind: Kind, t: f32) -> Intersection {
+fn intersection(
+    instance: &InstanceRecord,
+    instance_slot: u32,
+    view: &View,
+    slot: u32,
+    kind: Kind,
+    t: f32,
+) -> Intersection {
     let id = view.prim_ids.get(slot as usize).copied().unwrap_or(0);
     let (geometry_index, primitive_index) = view.locate(id);
     Intersection {
@@ -561,7 +678,15 @@ fn intersection(instance: &InstanceRecord, instance_slot: u32, view: &View, slot
 }
 
 #[inline(always)]
-fn test_triangle(ray: &Ray, t_max: f32, inst: &InstanceRecord, inst_slot: u32, view: &View, sheared: &ShearedRay, slot: u32) -> Option<Intersection> {
+fn test_triangle(
+    ray: &Ray,
+    t_max: f32,
+    inst: &InstanceRecord,
+    inst_slot: u32,
+    view: &View,
+    sheared: &ShearedRay,
+    slot: u32,
+) -> Option<Intersection> {
     let tri = view.triangles.get(slot as usize)?;
     let h = sheared.intersect(tri)?;
     if !(h.t > ray.t_min && h.t < t_max) {
@@ -586,7 +711,15 @@ fn test_triangle(ray: &Ray, t_max: f32, inst: &InstanceRecord, inst_slot: u32, v
 }
 
 #[inline(always)]
-fn test_aabb(ray: &Ray, t_max: f32, inst: &InstanceRecord, inst_slot: u32, view: &View, box_ray: &BoxRay, slot: u32) -> Option<Intersection> {
+fn test_aabb(
+    ray: &Ray,
+    t_max: f32,
+    inst: &InstanceRecord,
+    inst_slot: u32,
+    view: &View,
+    box_ray: &BoxRay,
+    slot: u32,
+) -> Option<Intersection> {
     let b = view.aabbs.get(slot as usize)?;
     let t = box_ray.aabb(b, ray.t_min, t_max)?;
     let mut c = intersection(inst, inst_slot, view, slot, Kind::Aabb, t);

@@ -3,8 +3,8 @@
 //! are reached through the instance references, so a BLAS updated in place under a built TLAS
 //! is traced as it is now.
 
-use super::query::{CommittedType, RayQuery};
 use super::Ray;
+use super::query::{CommittedType, RayQuery};
 use crate::device::{AccelerationStructure, Device};
 use crate::error::{Error, Result};
 use crate::layout::view::{Parts, View};
@@ -76,7 +76,11 @@ impl Hit {
 }
 
 impl Scene {
-    fn lock(guards: &mut Vec<(Arc<parking_lot::RwLock<HostMemory>>, Guard)>, mem: &Arc<parking_lot::RwLock<HostMemory>>, handle: u64) -> Result<usize> {
+    fn lock(
+        guards: &mut Vec<(Arc<parking_lot::RwLock<HostMemory>>, Guard)>,
+        mem: &Arc<parking_lot::RwLock<HostMemory>>,
+        handle: u64,
+    ) -> Result<usize> {
         if let Some(i) = guards.iter().position(|(m, _)| Arc::ptr_eq(m, mem)) {
             return Ok(i);
         }
@@ -89,16 +93,33 @@ impl Scene {
     pub fn new(device: &Device, tlas: AccelerationStructure) -> Result<Scene> {
         let mut guards = Vec::new();
         let obj = device.object(tlas)?;
-        let mem = obj.buffer.memory().ok_or_else(|| Error::NotBuilt { handle: tlas.0, reason: "its buffer has no memory bound".into() })?;
+        let mem = obj.buffer.memory().ok_or_else(|| Error::NotBuilt {
+            handle: tlas.0,
+            reason: "its buffer has no memory bound".into(),
+        })?;
         let m = Scene::lock(&mut guards, &mem, tlas.0)?;
         let range = obj.offset as usize..(obj.offset + obj.size) as usize;
         let bytes = &guards[m].1.bytes()[range.clone()];
-        let view = View::parse(bytes).map_err(|reason| Error::NotBuilt { handle: tlas.0, reason })?;
-        let region = Region { memory: m, range, parts: view.parts(bytes) };
+        let view = View::parse(bytes).map_err(|reason| Error::NotBuilt {
+            handle: tlas.0,
+            reason,
+        })?;
+        let region = Region {
+            memory: m,
+            range,
+            parts: view.parts(bytes),
+        };
         if view.header.kind != Kind::TopLevel as u32 {
-            return Err(Error::NotBuilt { handle: tlas.0, reason: "ray queries need a top-level structure".into() });
+            return Err(Error::NotBuilt {
+                handle: tlas.0,
+                reason: "ray queries need a top-level structure".into(),
+            });
         }
-        let references: Vec<u64> = view.instances.iter().map(|i| i.acceleration_structure_reference).collect();
+        let references: Vec<u64> = view
+            .instances
+            .iter()
+            .map(|i| i.acceleration_structure_reference)
+            .collect();
         let mut blases: Vec<(u64, Region)> = Vec::new();
         let mut instance_blas = Vec::with_capacity(references.len());
         let mut unresolved = 0;
@@ -114,7 +135,11 @@ impl Scene {
                 let range = o.offset as usize..(o.offset + o.size) as usize;
                 let bytes = &guards[m].1.bytes()[range.clone()];
                 let v = View::parse(bytes).ok()?;
-                (v.header.kind == Kind::BottomLevel as u32).then_some(Region { memory: m, range, parts: v.parts(bytes) })
+                (v.header.kind == Kind::BottomLevel as u32).then_some(Region {
+                    memory: m,
+                    range,
+                    parts: v.parts(bytes),
+                })
             })();
             match resolved {
                 Some(region) => {
@@ -147,7 +172,10 @@ impl Scene {
 
     /// Index of the bottom-level structure behind stored instance `slot`.
     pub(crate) fn instance_blas_index(&self, instance_slot: u32) -> Option<u32> {
-        self.instance_blas.get(instance_slot as usize).copied().filter(|&b| b != u32::MAX)
+        self.instance_blas
+            .get(instance_slot as usize)
+            .copied()
+            .filter(|&b| b != u32::MAX)
     }
 
     pub(crate) fn blas_view(&self, index: u32) -> Option<View<'_>> {
@@ -213,7 +241,11 @@ impl Scene {
         Ok(match c.committed_type() {
             CommittedType::None => Hit::MISS,
             k => Hit {
-                kind: if k == CommittedType::Triangle { HitKind::Triangle } else { HitKind::Generated },
+                kind: if k == CommittedType::Triangle {
+                    HitKind::Triangle
+                } else {
+                    HitKind::Generated
+                },
                 t: c.t,
                 instance_id: c.instance_id,
                 instance_custom_index: c.instance_custom_index,
@@ -229,7 +261,13 @@ impl Scene {
     /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order.
     pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
         use rayon::prelude::*;
-        rays.par_iter().with_min_len(256).map_init(|| self.tracer(), |t, r| if any_hit { t.any(r) } else { t.closest(r) }).collect()
+        rays.par_iter()
+            .with_min_len(256)
+            .map_init(
+                || self.tracer(),
+                |t, r| if any_hit { t.any(r) } else { t.closest(r) },
+            )
+            .collect()
     }
 
     /// Primitive kind of the BLAS behind stored instance `slot`, for statistics and tools.

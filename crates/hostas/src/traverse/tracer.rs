@@ -58,7 +58,12 @@ impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
         let mut stack = STACKS.with(|p| p.borrow_mut().pop()).unwrap_or_default();
         stack.clear();
-        Tracer { scene, tlas: scene.tlas_view(), cached: None, stack }
+        Tracer {
+            scene,
+            tlas: scene.tlas_view(),
+            cached: None,
+            stack,
+        }
     }
 
     /// Closest hit (see [`Scene::trace_closest`]).
@@ -84,17 +89,31 @@ impl<'s> Tracer<'s> {
 
     fn trace(&mut self, ray: &Ray, first_hit: bool) -> Result<Hit> {
         ray.validate()?;
-        let Some(tlas) = self.tlas else { return Ok(Hit::MISS) };
+        let Some(tlas) = self.tlas else {
+            return Ok(Hit::MISS);
+        };
         if tlas.nodes.is_empty() {
             return Ok(Hit::MISS);
         }
         let flags = ray.flags;
-        let mut best = Best { t: ray.t_max, kind: HitKind::Miss, instance_slot: 0, blas: 0, prim_slot: 0, barycentrics: [0.0; 2], front_face: false };
+        let mut best = Best {
+            t: ray.t_max,
+            kind: HitKind::Miss,
+            instance_slot: 0,
+            blas: 0,
+            prim_slot: 0,
+            barycentrics: [0.0; 2],
+            front_face: false,
+        };
         let world = BoxRay::new(ray.origin, ray.direction);
         let mut world_sheared: Option<ShearedRay> = None;
         let mut stack = std::mem::take(&mut self.stack);
         stack.clear();
-        stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
+        stack.push(Entry {
+            child: 0,
+            count: 0,
+            t: f32::NEG_INFINITY,
+        });
         'top: while let Some(e) = stack.pop() {
             if e.t > best.t {
                 continue;
@@ -105,11 +124,15 @@ impl<'s> Tracer<'s> {
             }
             let first = e.child & !LEAF_BIT;
             for slot in first..first + e.count {
-                let Some(inst) = tlas.instances.get(slot as usize) else { continue };
+                let Some(inst) = tlas.instances.get(slot as usize) else {
+                    continue;
+                };
                 if inst.mask & ray.cull_mask & 0xff == 0 {
                     continue;
                 }
-                let Some(bi) = self.scene.instance_blas_index(slot) else { continue };
+                let Some(bi) = self.scene.instance_blas_index(slot) else {
+                    continue;
+                };
                 let Some(view) = self.blas(bi) else { continue };
                 let skip = match view.prim_kind {
                     PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
@@ -121,14 +144,17 @@ impl<'s> Tracer<'s> {
                 }
                 // An identity instance sees the world ray: no transform, no new inverses.
                 let local = if inst.hints & INSTANCE_IDENTITY != 0 {
-                    let sheared = *world_sheared.get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
+                    let sheared = *world_sheared
+                        .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
                     (world, sheared)
                 } else {
                     let w2o = Affine::from_rows(inst.world_to_object);
                     let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
                     (BoxRay::new(o, d), ShearedRay::new(o, d))
                 };
-                let found = trace_blas(&mut stack, &view, inst, slot, bi, &local, ray, &mut best, first_hit);
+                let found = trace_blas(
+                    &mut stack, &view, inst, slot, bi, &local, ray, &mut best, first_hit,
+                );
                 if found && first_hit {
                     break 'top;
                 }
@@ -140,7 +166,9 @@ impl<'s> Tracer<'s> {
         }
         let inst = &tlas.instances[best.instance_slot as usize];
         let view = self.blas(best.blas);
-        let id = view.and_then(|v| v.prim_ids.get(best.prim_slot as usize).copied()).unwrap_or(0);
+        let id = view
+            .and_then(|v| v.prim_ids.get(best.prim_slot as usize).copied())
+            .unwrap_or(0);
         let (geometry_index, primitive_index) = view.map_or((0, 0), |v| v.locate(id));
         Ok(Hit {
             kind: best.kind,
@@ -157,8 +185,17 @@ impl<'s> Tracer<'s> {
 
 /// Tests the children of node `index` and pushes those the segment reaches, nearest last.
 #[inline(always)]
-fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u32, ray: &BoxRay, t_min: f32, t_max: f32) {
-    let Some(node) = nodes.get(index as usize) else { return };
+fn push_children(
+    stack: &mut Vec<Entry>,
+    nodes: &[crate::layout::Node],
+    index: u32,
+    ray: &BoxRay,
+    t_min: f32,
+    t_max: f32,
+) {
+    let Some(node) = nodes.get(index as usize) else {
+        return;
+    };
     let t = ray.node(node, t_min, t_max);
     // Empty slots have inverted boxes and never hit, so only the mask of hits matters.
     let mut mask = 0u32;
@@ -170,7 +207,11 @@ fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u
     }
     if mask & (mask - 1) == 0 {
         let k = mask.trailing_zeros() as usize;
-        stack.push(Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] });
+        stack.push(Entry {
+            child: node.child[k],
+            count: node.count[k] as u32,
+            t: t[k],
+        });
         return;
     }
     {
@@ -180,7 +221,11 @@ fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u
             while mask != 0 {
                 let k = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                let e = Entry { child: node.child[k], count: node.count[k] as u32, t: t[k] };
+                let e = Entry {
+                    child: node.child[k],
+                    count: node.count[k] as u32,
+                    t: t[k],
+                };
                 let mut j = n;
                 while j > 0 && hits[j - 1].t < e.t {
                     hits[j] = hits[j - 1];
@@ -197,7 +242,17 @@ fn push_children(stack: &mut Vec<Entry>, nodes: &[crate::layout::Node], index: u
 /// Traverses one instance's bottom-level structure on top of `stack`, updating `best`.
 /// Returns whether it accepted a hit.
 #[allow(clippy::too_many_arguments)]
-fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: u32, blas: u32, local: &(BoxRay, ShearedRay), ray: &Ray, best: &mut Best, first_hit: bool) -> bool {
+fn trace_blas(
+    stack: &mut Vec<Entry>,
+    view: &View,
+    inst: &InstanceRecord,
+    slot: u32,
+    blas: u32,
+    local: &(BoxRay, ShearedRay),
+    ray: &Ray,
+    best: &mut Best,
+    first_hit: bool,
+) -> bool {
     let (boxes, sheared) = (&local.0, &local.1);
     let flags = ray.flags;
     let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
@@ -216,7 +271,11 @@ fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: 
         opacity_culled(resolve_opacity(view, g, inst, flags), flags)
     };
     let base = stack.len();
-    stack.push(Entry { child: 0, count: 0, t: f32::NEG_INFINITY });
+    stack.push(Entry {
+        child: 0,
+        count: 0,
+        t: f32::NEG_INFINITY,
+    });
     let mut found = false;
     while stack.len() > base {
         let Some(e) = stack.pop() else { break };
@@ -231,8 +290,12 @@ fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: 
         for p in first..first + e.count {
             match view.prim_kind {
                 PrimKind::Triangles => {
-                    let Some(tri) = view.triangles.get(p as usize) else { continue };
-                    let Some(h) = sheared.intersect(tri) else { continue };
+                    let Some(tri) = view.triangles.get(p as usize) else {
+                        continue;
+                    };
+                    let Some(h) = sheared.intersect(tri) else {
+                        continue;
+                    };
                     if !(h.t > ray.t_min && h.t < best.t) {
                         continue;
                     }
@@ -240,15 +303,35 @@ fn trace_blas(stack: &mut Vec<Entry>, view: &View, inst: &InstanceRecord, slot: 
                     if (front && cull_front) || (!front && cull_back) || culled_by_opacity(p) {
                         continue;
                     }
-                    *best = Best { t: h.t, kind: HitKind::Triangle, instance_slot: slot, blas, prim_slot: p, barycentrics: [h.b, h.c], front_face: front };
+                    *best = Best {
+                        t: h.t,
+                        kind: HitKind::Triangle,
+                        instance_slot: slot,
+                        blas,
+                        prim_slot: p,
+                        barycentrics: [h.b, h.c],
+                        front_face: front,
+                    };
                 }
                 _ => {
-                    let Some(b) = view.aabbs.get(p as usize) else { continue };
-                    let Some(t) = boxes.aabb(b, ray.t_min, best.t) else { continue };
+                    let Some(b) = view.aabbs.get(p as usize) else {
+                        continue;
+                    };
+                    let Some(t) = boxes.aabb(b, ray.t_min, best.t) else {
+                        continue;
+                    };
                     if culled_by_opacity(p) {
                         continue;
                     }
-                    *best = Best { t, kind: HitKind::Generated, instance_slot: slot, blas, prim_slot: p, barycentrics: [0.0; 2], front_face: false };
+                    *best = Best {
+                        t,
+                        kind: HitKind::Generated,
+                        instance_slot: slot,
+                        blas,
+                        prim_slot: p,
+                        barycentrics: [0.0; 2],
+                        front_face: false,
+                    };
                 }
             }
             found = true;

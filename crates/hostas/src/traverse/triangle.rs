@@ -39,14 +39,28 @@ pub struct TriangleHit {
 impl ShearedRay {
     pub fn new(origin: Vec3, dir: Vec3) -> ShearedRay {
         let a = dir.map(f32::abs);
-        let kz = if a[0] >= a[1] && a[0] >= a[2] { 0 } else if a[1] >= a[2] { 1 } else { 2 };
+        let kz = if a[0] >= a[1] && a[0] >= a[2] {
+            0
+        } else if a[1] >= a[2] {
+            1
+        } else {
+            2
+        };
         let mut kx = (kz + 1) % 3;
         let mut ky = (kx + 1) % 3;
         if dir[kz] < 0.0 {
             std::mem::swap(&mut kx, &mut ky);
         }
         let sz = 1.0 / dir[kz];
-        ShearedRay { origin, kx, ky, kz, sx: dir[kx] * sz, sy: dir[ky] * sz, sz }
+        ShearedRay {
+            origin,
+            kx,
+            ky,
+            kz,
+            sx: dir[kx] * sz,
+            sy: dir[ky] * sz,
+            sz,
+        }
     }
 
     /// Intersects the triangle `v` (three vertices, nine floats). Returns the hit for any
@@ -69,13 +83,21 @@ impl ShearedRay {
         let mut vv = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
         if u == 0.0 || vv == 0.0 || w == 0.0 {
-            let (axd, ayd, bxd, byd, cxd, cyd) = (ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64);
+            let (axd, ayd, bxd, byd, cxd, cyd) = (
+                ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
+            );
             u = (cxd * byd - cyd * bxd) as f32;
             vv = (axd * cyd - ayd * cxd) as f32;
             w = (bxd * ayd - byd * axd) as f32;
             // The f64 results are exact in sign; a value that rounds to zero in f32 is kept as
             // the smallest subnormal with the right sign.
-            let fix = |e: f32, exact: f64| if e == 0.0 && exact != 0.0 { f32::from_bits(1).copysign(exact.signum() as f32) } else { e };
+            let fix = |e: f32, exact: f64| {
+                if e == 0.0 && exact != 0.0 {
+                    f32::from_bits(1).copysign(exact.signum() as f32)
+                } else {
+                    e
+                }
+            };
             u = fix(u, cxd * byd - cyd * bxd);
             vv = fix(vv, axd * cyd - ayd * cxd);
             w = fix(w, bxd * ayd - byd * axd);
@@ -113,7 +135,12 @@ impl ShearedRay {
         if t.is_nan() {
             return None;
         }
-        Some(TriangleHit { t, b: vv * rcp, c: w * rcp, front_face: det > 0.0 })
+        Some(TriangleHit {
+            t,
+            b: vv * rcp,
+            c: w * rcp,
+            front_face: det > 0.0,
+        })
     }
 }
 
@@ -122,24 +149,32 @@ mod tests {
     use super::*;
 
     fn tri(p: [[f32; 3]; 3]) -> [f32; 9] {
-        [p[0][0], p[0][1], p[0][2], p[1][0], p[1][1], p[1][2], p[2][0], p[2][1], p[2][2]]
+        [
+            p[0][0], p[0][1], p[0][2], p[1][0], p[1][1], p[1][2], p[2][0], p[2][1], p[2][2],
+        ]
     }
 
     #[test]
     fn spec_worked_example_facing() {
         // Ray along -z; (0,1,0),(0,0,0),(1,1,0) is front-facing, the reverse order is not.
         let r = ShearedRay::new([0.25, 0.5, 1.0], [0.0, 0.0, -1.0]);
-        let front = r.intersect(&tri([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 0.0]])).unwrap();
+        let front = r
+            .intersect(&tri([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 0.0]]))
+            .unwrap();
         assert!(front.front_face);
         assert_eq!(front.t, 1.0);
-        let back = r.intersect(&tri([[1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]])).unwrap();
+        let back = r
+            .intersect(&tri([[1.0, 1.0, 0.0], [0.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+            .unwrap();
         assert!(!back.front_face);
     }
 
     #[test]
     fn barycentrics_weight_vertices_one_and_two() {
         let r = ShearedRay::new([0.2, 0.3, 1.0], [0.0, 0.0, -1.0]);
-        let h = r.intersect(&tri([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])).unwrap();
+        let h = r
+            .intersect(&tri([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]))
+            .unwrap();
         assert!((h.b - 0.2).abs() < 1e-6 && (h.c - 0.3).abs() < 1e-6);
     }
 
@@ -151,9 +186,16 @@ mod tests {
         let v2 = [1.0, 1.0, 0.0];
         let v3 = [1.0, 0.0, 0.0];
         for dir in [[0.0f32, 0.0, -1.0], [0.0, 0.0, 1.0], [0.3, -0.2, -1.0]] {
-            let origin = [0.5 - 0.5 * dir[0] / dir[2].abs(), 0.5 - 0.5 * dir[1] / dir[2].abs(), if dir[2] < 0.0 { 0.5 } else { -0.5 }];
+            let origin = [
+                0.5 - 0.5 * dir[0] / dir[2].abs(),
+                0.5 - 0.5 * dir[1] / dir[2].abs(),
+                if dir[2] < 0.0 { 0.5 } else { -0.5 },
+            ];
             let r = ShearedRay::new(origin, dir);
-            let hits = [tri([v0, v1, v2]), tri([v2, v1, v3])].iter().filter(|t| r.intersect(t).is_some()).count();
+            let hits = [tri([v0, v1, v2]), tri([v2, v1, v3])]
+                .iter()
+                .filter(|t| r.intersect(t).is_some())
+                .count();
             assert_eq!(hits, 1, "dir {dir:?}");
         }
     }
@@ -161,6 +203,9 @@ mod tests {
     #[test]
     fn zero_area_is_never_hit() {
         let r = ShearedRay::new([0.5, 0.0, 1.0], [0.0, 0.0, -1.0]);
-        assert!(r.intersect(&tri([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]])).is_none());
+        assert!(
+            r.intersect(&tri([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]]))
+                .is_none()
+        );
     }
 }
