@@ -44,18 +44,7 @@ pub fn build_triangles(
     geometry_flags: vk::GeometryFlagsKHR,
     flags: vk::BuildAccelerationStructureFlagsKHR,
 ) -> hostas::Result<AccelerationStructure> {
-    let g = hostas::Geometry::triangles(
-        hostas::TrianglesData {
-            vertex_format: vk::Format::R32G32B32_SFLOAT,
-            vertex_data: bytemuck::cast_slice(positions),
-            vertex_stride: 12,
-            max_vertex: (positions.len() as u32).saturating_sub(1),
-            index_type: vk::IndexType::UINT32,
-            index_data: Some(bytemuck::cast_slice(indices)),
-            transform_data: None,
-        },
-        geometry_flags,
-    );
+    let g = hostas::quick::triangle_mesh(positions, indices, geometry_flags);
     let range = hostas::BuildRangeInfo {
         primitive_count: indices.len() as u32,
         ..Default::default()

@@ -89,21 +89,11 @@ pub fn trace(
 ) -> hostas::Result<Option<Surface>> {
     let q = run(scene, ray, programs)?;
     let c = *q.committed();
-    let kind = match c.committed_type() {
-        CommittedType::None => return Ok(None),
-        CommittedType::Triangle => HitKind::Triangle,
-        CommittedType::Generated => HitKind::Generated,
-    };
-    let hit = Hit {
-        kind,
-        t: c.t,
-        instance_id: c.instance_id,
-        instance_custom_index: c.instance_custom_index,
-        geometry_index: c.geometry_index,
-        primitive_index: c.primitive_index,
-        barycentrics: c.barycentrics,
-        front_face: c.front_face,
-    };
+    let hit = Hit::from_committed(&c);
+    if !hit.is_hit() {
+        return Ok(None);
+    }
+    let kind = hit.kind;
     let position = add(ray.origin, scale(ray.direction, c.t));
     let object_position = object_point(&q, true, c.t).unwrap_or(position);
     let object_normal = match kind {

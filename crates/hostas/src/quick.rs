@@ -44,14 +44,14 @@ pub fn build(
     }
 }
 
-/// A bottom-level structure over an indexed triangle mesh (one opaque geometry).
-pub fn build_triangle_blas(
-    device: &Device,
-    positions: &[[f32; 3]],
-    indices: &[[u32; 3]],
-    flags: vk::BuildAccelerationStructureFlagsKHR,
-) -> Result<AccelerationStructure> {
-    let g = Geometry::triangles(
+/// The geometry of an indexed triangle mesh: `R32G32B32_SFLOAT` positions, `UINT32` indices,
+/// no transform.
+pub fn triangle_mesh<'a>(
+    positions: &'a [[f32; 3]],
+    indices: &'a [[u32; 3]],
+    flags: vk::GeometryFlagsKHR,
+) -> Geometry<'a> {
+    Geometry::triangles(
         TrianglesData {
             vertex_format: vk::Format::R32G32B32_SFLOAT,
             vertex_data: bytemuck::cast_slice(positions),
@@ -61,8 +61,18 @@ pub fn build_triangle_blas(
             index_data: Some(bytemuck::cast_slice(indices)),
             transform_data: None,
         },
-        vk::GeometryFlagsKHR::OPAQUE,
-    );
+        flags,
+    )
+}
+
+/// A bottom-level structure over an indexed triangle mesh (one opaque geometry).
+pub fn build_triangle_blas(
+    device: &Device,
+    positions: &[[f32; 3]],
+    indices: &[[u32; 3]],
+    flags: vk::BuildAccelerationStructureFlagsKHR,
+) -> Result<AccelerationStructure> {
+    let g = triangle_mesh(positions, indices, vk::GeometryFlagsKHR::OPAQUE);
     let range = BuildRangeInfo {
         primitive_count: indices.len() as u32,
         ..Default::default()

@@ -15,7 +15,7 @@
 use super::common::*;
 use hostas::commands::SerializedHeader;
 use hostas::commands::copy::SERIALIZED_HEADER_SIZE;
-use hostas::layout::{Header, view};
+use hostas::layout::{GeometryRecord as Record, Header, view};
 use hostas::{
     AccelerationStructure, AccelerationStructureCreateInfo, Buffer, BuildGeometryInfo,
     BuildRangeInfo, Device, Geometry, vk,
@@ -294,40 +294,16 @@ fn exercise_with(fx: &Fixture, a: AccelerationStructure, lcg: &mut Lcg, trusted:
     }
 }
 
-/// One geometry record as the layout stores it.
-#[derive(Clone, Copy, Debug)]
-pub struct Record {
-    pub first_primitive: u32,
-    pub primitive_count: u32,
-    pub flags: u32,
-    pub geometry_type: u32,
-    pub vertex_format: u32,
-    pub index_type: u32,
-    pub max_vertex: u32,
-    pub extra: u32,
-    pub first_vertex: u32,
-}
-
+/// The structure's geometry records (the layout's own type, read unaligned), or `None` when
+/// they do not fit in `bytes`.
 pub fn records(h: &Header, bytes: &[u8]) -> Option<Vec<Record>> {
+    let size = hostas::layout::GEOMETRY_RECORD_SIZE;
     (0..h.geometry_count as u64)
         .map(|g| {
-            let at = usize::try_from(h.geometries_offset.checked_add(48 * g)?).ok()?;
-            let w = |k: usize| -> Option<u32> {
-                Some(u32::from_le_bytes(
-                    bytes.get(at + 4 * k..at + 4 * k + 4)?.try_into().ok()?,
-                ))
-            };
-            Some(Record {
-                first_primitive: w(0)?,
-                primitive_count: w(1)?,
-                flags: w(2)?,
-                geometry_type: w(3)?,
-                vertex_format: w(4)?,
-                index_type: w(5)?,
-                max_vertex: w(6)?,
-                extra: w(7)?,
-                first_vertex: w(8)?,
-            })
+            let at = usize::try_from(h.geometries_offset.checked_add(size * g)?).ok()?;
+            Some(bytemuck::pod_read_unaligned(
+                bytes.get(at..at + size as usize)?,
+            ))
         })
         .collect()
 }

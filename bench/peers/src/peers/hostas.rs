@@ -20,9 +20,7 @@ use crate::rays::{Hit, Ray, RaySet};
 use crate::report::{Class, Row};
 use crate::scene::Scene;
 use crate::util::{median_ms, pool, time};
-use hostas::{
-    AccelerationStructure, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, TrianglesData, vk,
-};
+use hostas::{AccelerationStructure, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, vk};
 use serde_json::json;
 
 type Flags = vk::BuildAccelerationStructureFlagsKHR;
@@ -167,16 +165,9 @@ fn run_preset(
 }
 
 fn triangles<'a>(pos: &'a [[f32; 3]], idx: &'a [[u32; 3]]) -> [Geometry<'a>; 1] {
-    [Geometry::triangles(
-        TrianglesData {
-            vertex_format: vk::Format::R32G32B32_SFLOAT,
-            vertex_data: bytemuck::cast_slice(pos),
-            vertex_stride: 12,
-            max_vertex: (pos.len() as u32).saturating_sub(1),
-            index_type: vk::IndexType::UINT32,
-            index_data: Some(bytemuck::cast_slice(idx)),
-            transform_data: None,
-        },
+    [hostas::quick::triangle_mesh(
+        pos,
+        idx,
         vk::GeometryFlagsKHR::OPAQUE,
     )]
 }

@@ -143,24 +143,6 @@ fn median(mut v: Vec<f64>) -> f64 {
     }
 }
 
-fn triangles_geometry<'a>(
-    positions: &'a [[f32; 3]],
-    indices: &'a [[u32; 3]],
-) -> hostas::Geometry<'a> {
-    hostas::Geometry::triangles(
-        hostas::TrianglesData {
-            vertex_format: vk::Format::R32G32B32_SFLOAT,
-            vertex_data: bytemuck::cast_slice(positions),
-            vertex_stride: 12,
-            max_vertex: (positions.len() as u32).saturating_sub(1),
-            index_type: vk::IndexType::UINT32,
-            index_data: Some(bytemuck::cast_slice(indices)),
-            transform_data: None,
-        },
-        vk::GeometryFlagsKHR::OPAQUE,
-    )
-}
-
 /// A BLAS of `mesh` with memory and scratch allocated once, for repeated builds.
 struct Target {
     dst: AccelerationStructure,
@@ -170,7 +152,11 @@ struct Target {
 }
 
 fn target(device: &Device, m: &Mesh, flags: F) -> Result<Target> {
-    let geoms = [triangles_geometry(&m.positions, &m.indices)];
+    let geoms = [hostas::quick::triangle_mesh(
+        &m.positions,
+        &m.indices,
+        vk::GeometryFlagsKHR::OPAQUE,
+    )];
     let probe = BuildGeometryInfo {
         ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
         flags,
@@ -210,7 +196,11 @@ fn build_into(
     flags: F,
     update: bool,
 ) -> Result<f64> {
-    let geoms = [triangles_geometry(positions, indices)];
+    let geoms = [hostas::quick::triangle_mesh(
+        positions,
+        indices,
+        vk::GeometryFlagsKHR::OPAQUE,
+    )];
     let range = [hostas::BuildRangeInfo {
         primitive_count: indices.len() as u32,
         ..Default::default()

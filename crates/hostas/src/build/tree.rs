@@ -51,23 +51,3 @@ impl InnerNode {
 pub struct Tree {
     pub root: Option<(Aabb, Child)>,
 }
-
-impl Tree {
-    /// Number of inner nodes and depth (root = 1).
-    pub fn shape(&self) -> (u32, u32) {
-        fn walk(c: &Child, depth: u32, nodes: &mut u32, max_depth: &mut u32) {
-            if let Child::Inner(n) = c {
-                *nodes += 1;
-                *max_depth = (*max_depth).max(depth);
-                for (_, ch) in n.children() {
-                    walk(ch, depth + 1, nodes, max_depth);
-                }
-            }
-        }
-        let (mut nodes, mut depth) = (0, 0);
-        if let Some((_, c)) = &self.root {
-            walk(c, 1, &mut nodes, &mut depth);
-        }
-        (nodes, depth)
-    }
-}

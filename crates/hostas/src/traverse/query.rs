@@ -12,8 +12,8 @@ use super::{Ray, RayFlags};
 use crate::error::{Error, Location, Result};
 use crate::layout::view::View;
 use crate::layout::{
-    EMPTY_CHILD, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node,
-    PrimKind, WIDTH,
+    HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind,
+    WIDTH,
 };
 use crate::math::{Affine, Vec3, fmax, fmin};
 use ash::vk;
@@ -280,35 +280,54 @@ impl<'s> Level<'s> {
                 self.leaf_end = self.leaf_next + e.count;
                 return true;
             }
-            let Some(node) = self.view.nodes.get(e.child as usize) else {
+            let nodes = self.view.nodes;
+            let Some(node) = nodes.get(e.child as usize) else {
                 continue;
             };
             let t = self.ray.node(node, t_min, t_max);
-            // Push hit children farthest first, so the nearest is popped next.
-            let mut hits = [Entry::default(); WIDTH];
-            let mut n = 0;
-            for k in 0..WIDTH {
-                if t[k] != f32::INFINITY && node.child[k] != EMPTY_CHILD {
-                    // Insertion into `hits`, kept in decreasing distance.
-                    let e = Entry {
-                        child: node.child[k],
-                        count: node.count[k] as u32,
-                        t: t[k],
-                    };
-                    let mut j = n;
-                    while j > 0 && hits[j - 1].t < e.t {
-                        hits[j] = hits[j - 1];
-                        j -= 1;
-                    }
-                    hits[j] = e;
-                    n += 1;
-                }
-            }
-            for e in &hits[..n] {
-                self.stack.push(*e);
-            }
+            push_hit_children(node, &t, |e| self.stack.push(e));
         }
         false
+    }
+}
+
+/// Hands `push` the children of `node` that the entry distances `t` (from [`BoxRay::node`])
+/// say the segment reaches, farthest first, so that the nearest is popped next. Empty slots
+/// have inverted boxes and never hit, so only the hit mask matters.
+#[inline(always)]
+pub(super) fn push_hit_children(node: &Node, t: &[f32; WIDTH], mut push: impl FnMut(Entry)) {
+    let mut mask = 0u32;
+    for (k, tk) in t.iter().enumerate() {
+        mask |= ((*tk != f32::INFINITY) as u32) << k;
+    }
+    let entry = |k: usize| Entry {
+        child: node.child[k],
+        count: node.count[k] as u32,
+        t: t[k],
+    };
+    if mask & mask.wrapping_sub(1) == 0 {
+        // None or one: no ordering to do.
+        if mask != 0 {
+            push(entry(mask.trailing_zeros() as usize));
+        }
+        return;
+    }
+    // Insertion into `hits`, kept in decreasing distance.
+    let mut hits = [Entry::default(); WIDTH];
+    let mut n = 0;
+    while mask != 0 {
+        let e = entry(mask.trailing_zeros() as usize);
+        mask &= mask - 1;
+        let mut j = n;
+        while j > 0 && hits[j - 1].t < e.t {
+            hits[j] = hits[j - 1];
+            j -= 1;
+        }
+        hits[j] = e;
+        n += 1;
+    }
+    for e in &hits[..n] {
+        push(*e);
     }
 }
 

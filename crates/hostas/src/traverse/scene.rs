@@ -7,8 +7,8 @@ use super::Ray;
 use super::query::{CommittedType, RayQuery};
 use crate::device::{AccelerationStructure, Device};
 use crate::error::{Error, Result};
+use crate::layout::Kind;
 use crate::layout::view::{Parts, View};
-use crate::layout::{Kind, PrimKind};
 use crate::memory::HostMemory;
 use parking_lot::RawRwLock;
 use parking_lot::lock_api::ArcRwLockReadGuard;
@@ -72,6 +72,25 @@ impl Hit {
     };
     pub fn is_hit(&self) -> bool {
         self.kind != HitKind::Miss
+    }
+
+    /// The hit a ray query committed (`MISS` when it committed nothing).
+    pub fn from_committed(c: &super::Intersection) -> Hit {
+        let kind = match c.committed_type() {
+            CommittedType::None => return Hit::MISS,
+            CommittedType::Triangle => HitKind::Triangle,
+            CommittedType::Generated => HitKind::Generated,
+        };
+        Hit {
+            kind,
+            t: c.t,
+            instance_id: c.instance_id,
+            instance_custom_index: c.instance_custom_index,
+            geometry_index: c.geometry_index,
+            primitive_index: c.primitive_index,
+            barycentrics: c.barycentrics,
+            front_face: c.front_face,
+        }
     }
 }
 
@@ -237,24 +256,7 @@ impl Scene {
                 None => {}
             }
         }
-        let c = q.committed();
-        Ok(match c.committed_type() {
-            CommittedType::None => Hit::MISS,
-            k => Hit {
-                kind: if k == CommittedType::Triangle {
-                    HitKind::Triangle
-                } else {
-                    HitKind::Generated
-                },
-                t: c.t,
-                instance_id: c.instance_id,
-                instance_custom_index: c.instance_custom_index,
-                geometry_index: c.geometry_index,
-                primitive_index: c.primitive_index,
-                barycentrics: c.barycentrics,
-                front_face: c.front_face,
-            },
-        })
+        Ok(Hit::from_committed(q.committed()))
     }
 
     /// Traces a batch of rays on all threads of the current rayon pool: closest hits, or any
@@ -268,11 +270,6 @@ impl Scene {
                 |t, r| if any_hit { t.any(r) } else { t.closest(r) },
             )
             .collect()
-    }
-
-    /// Primitive kind of the BLAS behind stored instance `slot`, for statistics and tools.
-    pub fn instance_prim_kind(&self, slot: u32) -> Option<PrimKind> {
-        self.blas_view_for(slot).map(|v| v.prim_kind)
     }
 }
 

@@ -7,13 +7,13 @@
 //! candidates are not materialized, and the ids of the hit are looked up once at the end.
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
-use super::query::{BoxRay, Entry, opacity_culled, resolve_opacity};
+use super::query::{BoxRay, Entry, opacity_culled, push_hit_children, resolve_opacity};
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
 use crate::error::Result;
 use crate::layout::view::View;
-use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind, WIDTH};
+use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind};
 use crate::math::Affine;
 use ash::vk;
 
@@ -197,46 +197,7 @@ fn push_children(
         return;
     };
     let t = ray.node(node, t_min, t_max);
-    // Empty slots have inverted boxes and never hit, so only the mask of hits matters.
-    let mut mask = 0u32;
-    for (k, tk) in t.iter().enumerate() {
-        mask |= ((*tk != f32::INFINITY) as u32) << k;
-    }
-    if mask == 0 {
-        return;
-    }
-    if mask & (mask - 1) == 0 {
-        let k = mask.trailing_zeros() as usize;
-        stack.push(Entry {
-            child: node.child[k],
-            count: node.count[k] as u32,
-            t: t[k],
-        });
-        return;
-    }
-    {
-        {
-            let mut hits = [Entry::default(); WIDTH];
-            let mut n = 0;
-            while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let e = Entry {
-                    child: node.child[k],
-                    count: node.count[k] as u32,
-                    t: t[k],
-                };
-                let mut j = n;
-                while j > 0 && hits[j - 1].t < e.t {
-                    hits[j] = hits[j - 1];
-                    j -= 1;
-                }
-                hits[j] = e;
-                n += 1;
-            }
-            stack.extend_from_slice(&hits[..n]);
-        }
-    }
+    push_hit_children(node, &t, |e| stack.push(e));
 }
 
 /// Traverses one instance's bottom-level structure on top of `stack`, updating `best`.
