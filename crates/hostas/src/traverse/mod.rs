@@ -83,9 +83,10 @@ impl Ray {
     /// The runtime rules of `OpRayQueryInitializeKHR` (VUID-RuntimeSpirv-OpRayQueryInitializeKHR-*).
     pub fn validate(&self) -> Result<()> {
         let bad = |vuid: &'static str, msg: &str| Err(Error::vuid(vuid, Location::NONE, msg));
-        if !self.origin.iter().all(|v| v.is_finite())
-            || !self.direction.iter().all(|v| v.is_finite())
-        {
+        // `x * 0` is 0 for every finite `x` and NaN for infinities and NaN.
+        let [o, d] = [self.origin, self.direction];
+        let zero = (o[0] * 0.0 + o[1] * 0.0 + o[2] * 0.0) + (d[0] * 0.0 + d[1] * 0.0 + d[2] * 0.0);
+        if zero != 0.0 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06348",
                 "ray origin and direction must be finite",

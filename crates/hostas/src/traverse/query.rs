@@ -97,7 +97,7 @@ impl Intersection {
     }
 }
 
-const STACK_CAPACITY: usize = (WIDTH - 1) * MAX_DEPTH as usize + WIDTH;
+pub(super) const STACK_CAPACITY: usize = (WIDTH - 1) * MAX_DEPTH as usize + WIDTH;
 
 #[derive(Clone, Copy, Default)]
 pub(super) struct Entry {
@@ -171,18 +171,23 @@ impl BoxRay {
         // A zero component gives an infinite inverse: a slab the origin is outside of gives
         // +-inf (never entered), and a ray lying exactly in a slab's plane gives 0 * inf = NaN,
         // which the min/max below drop (the ray is inside that slab, boundaries included).
-        let inv = dir.map(|d| 1.0 / d);
+        let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
         BoxRay {
             origin,
             inv,
-            neg: inv.map(|i| i.is_sign_negative()),
+            neg: [
+                inv[0].is_sign_negative(),
+                inv[1].is_sign_negative(),
+                inv[2].is_sign_negative(),
+            ],
         }
     }
 
-    /// Entry distances of the children of `node`; `f32::INFINITY` where the segment
-    /// `[t_min, t_max]` misses (inclusive at both ends).
+    /// Entry distances of the children of `node` and the mask of those the segment
+    /// `[t_min, t_max]` reaches (inclusive at both ends). Empty slots have inverted boxes and
+    /// never hit.
     #[inline(always)]
-    pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> [f32; WIDTH] {
+    pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
         let (nx, fx) = if self.neg[0] {
             (&n.hi_x, &n.lo_x)
         } else {
@@ -200,11 +205,12 @@ impl BoxRay {
         };
         let [ox, oy, oz] = self.origin;
         let [ix, iy, iz] = self.inv;
-        let mut out = [f32::INFINITY; WIDTH];
+        let mut near = [0.0; WIDTH];
+        let mut hit = [false; WIDTH];
         for k in 0..WIDTH {
             // `fmax(a, b)` and `fmin(a, b)` return `b` when `a` is NaN: each axis term goes
             // first, so a NaN from a ray in a slab plane leaves the interval unbounded there.
-            let near = fmax(
+            near[k] = fmax(
                 (nx[k] - ox) * ix,
                 fmax((ny[k] - oy) * iy, fmax((nz[k] - oz) * iz, t_min)),
             );
@@ -215,9 +221,14 @@ impl BoxRay {
                     fmin((fz[k] - oz) * iz * ROBUST_FAR, t_max),
                 ),
             );
-            out[k] = if near <= far { near } else { f32::INFINITY };
+            // A ray parallel to a slab it is outside of enters at +inf: a miss.
+            hit[k] = near[k] <= far && near[k] < f32::INFINITY;
         }
-        out
+        let mut mask = 0u32;
+        for (k, h) in hit.iter().enumerate() {
+            mask |= (*h as u32) << k;
+        }
+        (mask, near)
     }
 
     #[inline(always)]
@@ -284,22 +295,22 @@ impl<'s> Level<'s> {
             let Some(node) = nodes.get(e.child as usize) else {
                 continue;
             };
-            let t = self.ray.node(node, t_min, t_max);
-            push_hit_children(node, &t, |e| self.stack.push(e));
+            let (mask, t) = self.ray.node(node, t_min, t_max);
+            push_hit_children(node, mask, &t, |e| self.stack.push(e));
         }
         false
     }
 }
 
-/// Hands `push` the children of `node` that the entry distances `t` (from [`BoxRay::node`])
-/// say the segment reaches, farthest first, so that the nearest is popped next. Empty slots
-/// have inverted boxes and never hit, so only the hit mask matters.
+/// Hands `push` the children of `node` in `mask` (from [`BoxRay::node`], with their entry
+/// distances `t`), farthest first, so that the nearest is popped next.
 #[inline(always)]
-pub(super) fn push_hit_children(node: &Node, t: &[f32; WIDTH], mut push: impl FnMut(Entry)) {
-    let mut mask = 0u32;
-    for (k, tk) in t.iter().enumerate() {
-        mask |= ((*tk != f32::INFINITY) as u32) << k;
-    }
+pub(super) fn push_hit_children(
+    node: &Node,
+    mut mask: u32,
+    t: &[f32; WIDTH],
+    mut push: impl FnMut(Entry),
+) {
     let entry = |k: usize| Entry {
         child: node.child[k],
         count: node.count[k] as u32,

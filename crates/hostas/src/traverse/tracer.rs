@@ -7,7 +7,9 @@
 //! candidates are not materialized, and the ids of the hit are looked up once at the end.
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
-use super::query::{BoxRay, Entry, opacity_culled, push_hit_children, resolve_opacity};
+use super::query::{
+    BoxRay, Entry, STACK_CAPACITY, opacity_culled, push_hit_children, resolve_opacity,
+};
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
@@ -54,10 +56,13 @@ struct Best {
     front_face: bool,
 }
 
+/// Room for a top-level and a bottom-level traversal on top of it.
+const TRACER_STACK: usize = 2 * STACK_CAPACITY;
+
 impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
         let mut stack = STACKS.with(|p| p.borrow_mut().pop()).unwrap_or_default();
-        stack.clear();
+        stack.resize(TRACER_STACK, Entry::default());
         Tracer {
             scene,
             tlas: scene.tlas_view(),
@@ -108,56 +113,85 @@ impl<'s> Tracer<'s> {
         let world = BoxRay::new(ray.origin, ray.direction);
         let mut world_sheared: Option<ShearedRay> = None;
         let mut stack = std::mem::take(&mut self.stack);
-        stack.clear();
-        stack.push(Entry {
+        let mut sp = 0;
+        let mut cur = Entry {
             child: 0,
             count: 0,
             t: f32::NEG_INFINITY,
-        });
-        'top: while let Some(e) = stack.pop() {
-            if e.t > best.t {
-                continue;
+        };
+        'top: loop {
+            if cur.child & LEAF_BIT == 0 {
+                if let Some(next) = descend(
+                    &mut stack, &mut sp, tlas.nodes, cur.child, &world, ray.t_min, best.t,
+                ) {
+                    cur = next;
+                    continue;
+                }
+            } else {
+                let first = cur.child & !LEAF_BIT;
+                for slot in first..first + cur.count {
+                    let Some(inst) = tlas.instances.get(slot as usize) else {
+                        continue;
+                    };
+                    if inst.mask & ray.cull_mask & 0xff == 0 {
+                        continue;
+                    }
+                    let Some(bi) = self.scene.instance_blas_index(slot) else {
+                        continue;
+                    };
+                    let Some(view) = self.blas(bi) else { continue };
+                    let skip = match view.prim_kind {
+                        PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
+                        PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
+                        _ => true,
+                    };
+                    if skip || view.nodes.is_empty() {
+                        continue;
+                    }
+                    // An identity instance sees the world ray: no transform, no new inverses.
+                    let local = if inst.hints & INSTANCE_IDENTITY != 0 {
+                        let sheared = *world_sheared
+                            .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
+                        (world, sheared)
+                    } else {
+                        let w2o = Affine::from_rows(inst.world_to_object);
+                        let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
+                        (BoxRay::new(o, d), ShearedRay::new(o, d))
+                    };
+                    let at = BlasAt {
+                        view: &view,
+                        inst,
+                        slot,
+                        blas: bi,
+                    };
+                    let found = match local.1.perm {
+                        0 => {
+                            trace_blas::<0>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
+                        }
+                        1 => {
+                            trace_blas::<1>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
+                        }
+                        2 => {
+                            trace_blas::<2>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
+                        }
+                        3 => {
+                            trace_blas::<3>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
+                        }
+                        4 => {
+                            trace_blas::<4>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
+                        }
+                        _ => {
+                            trace_blas::<5>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
+                        }
+                    };
+                    if found && first_hit {
+                        break 'top;
+                    }
+                }
             }
-            if e.child & LEAF_BIT == 0 {
-                push_children(&mut stack, tlas.nodes, e.child, &world, ray.t_min, best.t);
-                continue;
-            }
-            let first = e.child & !LEAF_BIT;
-            for slot in first..first + e.count {
-                let Some(inst) = tlas.instances.get(slot as usize) else {
-                    continue;
-                };
-                if inst.mask & ray.cull_mask & 0xff == 0 {
-                    continue;
-                }
-                let Some(bi) = self.scene.instance_blas_index(slot) else {
-                    continue;
-                };
-                let Some(view) = self.blas(bi) else { continue };
-                let skip = match view.prim_kind {
-                    PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
-                    PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
-                    _ => true,
-                };
-                if skip || view.nodes.is_empty() {
-                    continue;
-                }
-                // An identity instance sees the world ray: no transform, no new inverses.
-                let local = if inst.hints & INSTANCE_IDENTITY != 0 {
-                    let sheared = *world_sheared
-                        .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
-                    (world, sheared)
-                } else {
-                    let w2o = Affine::from_rows(inst.world_to_object);
-                    let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
-                    (BoxRay::new(o, d), ShearedRay::new(o, d))
-                };
-                let found = trace_blas(
-                    &mut stack, &view, inst, slot, bi, &local, ray, &mut best, first_hit,
-                );
-                if found && first_hit {
-                    break 'top;
-                }
+            match pop(&stack, &mut sp, 0, best.t) {
+                Some(e) => cur = e,
+                None => break,
             }
         }
         self.stack = stack;
@@ -183,37 +217,83 @@ impl<'s> Tracer<'s> {
     }
 }
 
-/// Tests the children of node `index` and pushes those the segment reaches, nearest last.
+/// Tests the children of node `index`: returns the nearest one the segment reaches, having
+/// pushed the others (farthest deepest), or `None` when it reaches none.
 #[inline(always)]
-fn push_children(
-    stack: &mut Vec<Entry>,
+fn descend(
+    stack: &mut [Entry],
+    sp: &mut usize,
     nodes: &[crate::layout::Node],
     index: u32,
     ray: &BoxRay,
     t_min: f32,
     t_max: f32,
-) {
-    let Some(node) = nodes.get(index as usize) else {
-        return;
-    };
-    let t = ray.node(node, t_min, t_max);
-    push_hit_children(node, &t, |e| stack.push(e));
+) -> Option<Entry> {
+    let node = nodes.get(index as usize)?;
+    let (mask, t) = ray.node(node, t_min, t_max);
+    if mask == 0 {
+        return None;
+    }
+    if mask & (mask - 1) == 0 {
+        let k = mask.trailing_zeros() as usize;
+        return Some(Entry {
+            child: node.child[k],
+            count: node.count[k] as u32,
+            t: t[k],
+        });
+    }
+    push_hit_children(node, mask, &t, |e| {
+        // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
+        if let Some(slot) = stack.get_mut(*sp) {
+            *slot = e;
+            *sp += 1;
+        }
+    });
+    *sp -= 1;
+    stack.get(*sp).copied()
 }
 
-/// Traverses one instance's bottom-level structure on top of `stack`, updating `best`.
-/// Returns whether it accepted a hit.
-#[allow(clippy::too_many_arguments)]
-fn trace_blas(
-    stack: &mut Vec<Entry>,
-    view: &View,
-    inst: &InstanceRecord,
+/// Pops the nearest entry above `base` that may still hold a hit nearer than `t_max`.
+#[inline(always)]
+fn pop(stack: &[Entry], sp: &mut usize, base: usize, t_max: f32) -> Option<Entry> {
+    while *sp > base {
+        *sp -= 1;
+        let e = stack.get(*sp)?;
+        if e.t <= t_max {
+            return Some(*e);
+        }
+    }
+    None
+}
+
+/// The instance whose bottom-level structure is traversed.
+struct BlasAt<'a, 's> {
+    view: &'a View<'s>,
+    inst: &'a InstanceRecord,
     slot: u32,
     blas: u32,
+}
+
+/// Traverses one instance's bottom-level structure on top of `stack` (entries above `base`),
+/// updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
+/// of the sheared ray (`local.1.perm == P`), so that the triangle test indexes nothing at run
+/// time. Not inlined: the bottom-level loop is the hot one and gets the registers to itself.
+#[inline(never)]
+fn trace_blas<const P: usize>(
+    stack: &mut [Entry],
+    base: usize,
+    at: &BlasAt,
     local: &(BoxRay, ShearedRay),
     ray: &Ray,
     best: &mut Best,
     first_hit: bool,
 ) -> bool {
+    let BlasAt {
+        view,
+        inst,
+        slot,
+        blas,
+    } = *at;
     let (boxes, sheared) = (&local.0, &local.1);
     let flags = ray.flags;
     let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
@@ -231,76 +311,83 @@ fn trace_blas(
         let (g, _) = view.locate(id);
         opacity_culled(resolve_opacity(view, g, inst, flags), flags)
     };
-    let base = stack.len();
-    stack.push(Entry {
+    let mut sp = base;
+    let mut found = false;
+    let mut cur = Entry {
         child: 0,
         count: 0,
         t: f32::NEG_INFINITY,
-    });
-    let mut found = false;
-    while stack.len() > base {
-        let Some(e) = stack.pop() else { break };
-        if e.t > best.t {
-            continue;
-        }
-        if e.child & LEAF_BIT == 0 {
-            push_children(stack, view.nodes, e.child, boxes, ray.t_min, best.t);
-            continue;
-        }
-        let first = e.child & !LEAF_BIT;
-        for p in first..first + e.count {
-            match view.prim_kind {
-                PrimKind::Triangles => {
-                    let Some(tri) = view.triangles.get(p as usize) else {
-                        continue;
-                    };
-                    let Some(h) = sheared.intersect(tri) else {
-                        continue;
-                    };
-                    if !(h.t > ray.t_min && h.t < best.t) {
-                        continue;
-                    }
-                    let front = h.front_face != flip;
-                    if (front && cull_front) || (!front && cull_back) || culled_by_opacity(p) {
-                        continue;
-                    }
-                    *best = Best {
-                        t: h.t,
-                        kind: HitKind::Triangle,
-                        instance_slot: slot,
-                        blas,
-                        prim_slot: p,
-                        barycentrics: [h.b, h.c],
-                        front_face: front,
-                    };
+    };
+    loop {
+        if cur.child & LEAF_BIT == 0 {
+            if let Some(next) = descend(
+                stack, &mut sp, view.nodes, cur.child, boxes, ray.t_min, best.t,
+            ) {
+                cur = next;
+                continue;
+            }
+            match pop(stack, &mut sp, base, best.t) {
+                Some(e) => {
+                    cur = e;
+                    continue;
                 }
-                _ => {
-                    let Some(b) = view.aabbs.get(p as usize) else {
-                        continue;
-                    };
-                    let Some(t) = boxes.aabb(b, ray.t_min, best.t) else {
-                        continue;
-                    };
-                    if culled_by_opacity(p) {
-                        continue;
-                    }
-                    *best = Best {
-                        t,
-                        kind: HitKind::Generated,
-                        instance_slot: slot,
-                        blas,
-                        prim_slot: p,
-                        barycentrics: [0.0; 2],
-                        front_face: false,
-                    };
+                None => return found,
+            }
+        }
+        let first = cur.child & !LEAF_BIT;
+        let range = first as usize..first as usize + cur.count as usize;
+        if view.prim_kind == PrimKind::Triangles {
+            for (p, tri) in (first..).zip(view.triangles.get(range).unwrap_or_default()) {
+                let Some(h) = sheared.intersect_axes::<P>(tri) else {
+                    continue;
+                };
+                if !(h.t > ray.t_min && h.t < best.t) {
+                    continue;
+                }
+                let front = h.front_face != flip;
+                if (front && cull_front) || (!front && cull_back) || culled_by_opacity(p) {
+                    continue;
+                }
+                *best = Best {
+                    t: h.t,
+                    kind: HitKind::Triangle,
+                    instance_slot: slot,
+                    blas,
+                    prim_slot: p,
+                    barycentrics: [h.b, h.c],
+                    front_face: front,
+                };
+                found = true;
+                if first_hit {
+                    return true;
                 }
             }
-            found = true;
-            if first_hit {
-                stack.truncate(base);
-                return true;
+        } else {
+            for (p, b) in (first..).zip(view.aabbs.get(range).unwrap_or_default()) {
+                let Some(t) = boxes.aabb(b, ray.t_min, best.t) else {
+                    continue;
+                };
+                if culled_by_opacity(p) {
+                    continue;
+                }
+                *best = Best {
+                    t,
+                    kind: HitKind::Generated,
+                    instance_slot: slot,
+                    blas,
+                    prim_slot: p,
+                    barycentrics: [0.0; 2],
+                    front_face: false,
+                };
+                found = true;
+                if first_hit {
+                    return true;
+                }
             }
+        }
+        match pop(stack, &mut sp, base, best.t) {
+            Some(e) => cur = e,
+            None => return found,
         }
     }
-    found
 }

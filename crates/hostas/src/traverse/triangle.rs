@@ -15,13 +15,23 @@ use crate::math::Vec3;
 #[derive(Clone, Copy, Debug)]
 pub struct ShearedRay {
     pub origin: Vec3,
-    kx: usize,
-    ky: usize,
-    kz: usize,
+    /// Which of the six axis permutations [`AXES`] the ray uses (`kz` is the dominant axis of
+    /// the direction; `kx, ky` are swapped when it points down `kz`, keeping the winding).
+    pub perm: usize,
     sx: f32,
     sy: f32,
     sz: f32,
 }
+
+/// The axis permutations `(kx, ky, kz)` a [`ShearedRay`] can use.
+pub const AXES: [(usize, usize, usize); 6] = [
+    (1, 2, 0),
+    (2, 1, 0),
+    (2, 0, 1),
+    (0, 2, 1),
+    (0, 1, 2),
+    (1, 0, 2),
+];
 
 /// A ray/triangle intersection before range checks.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -36,9 +46,17 @@ pub struct TriangleHit {
     pub front_face: bool,
 }
 
+/// The sheared triangle: 2D vertex positions `x, y` relative to the ray, and the unscaled
+/// depths `z` along the dominant axis.
+struct Sheared {
+    x: [f32; 3],
+    y: [f32; 3],
+    z: [f32; 3],
+}
+
 impl ShearedRay {
     pub fn new(origin: Vec3, dir: Vec3) -> ShearedRay {
-        let a = dir.map(f32::abs);
+        let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
         let kz = if a[0] >= a[1] && a[0] >= a[2] {
             0
         } else if a[1] >= a[2] {
@@ -46,17 +64,12 @@ impl ShearedRay {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        if dir[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let perm = 2 * kz + usize::from(dir[kz] < 0.0);
+        let (kx, ky, _) = AXES[perm];
         let sz = 1.0 / dir[kz];
         ShearedRay {
             origin,
-            kx,
-            ky,
-            kz,
+            perm,
             sx: dir[kx] * sz,
             sy: dir[ky] * sz,
             sz,
@@ -68,76 +81,112 @@ impl ShearedRay {
     /// zero (the spec culls such triangles unconditionally).
     #[inline(always)]
     pub fn intersect(&self, v: &[f32; 9]) -> Option<TriangleHit> {
+        match self.perm {
+            0 => self.intersect_axes::<0>(v),
+            1 => self.intersect_axes::<1>(v),
+            2 => self.intersect_axes::<2>(v),
+            3 => self.intersect_axes::<3>(v),
+            4 => self.intersect_axes::<4>(v),
+            _ => self.intersect_axes::<5>(v),
+        }
+    }
+
+    /// [`ShearedRay::intersect`] for a ray whose `perm` is `P`, with the axes known at compile
+    /// time (the batch tracer instantiates its whole bottom-level loop per permutation).
+    #[inline(always)]
+    pub fn intersect_axes<const P: usize>(&self, v: &[f32; 9]) -> Option<TriangleHit> {
+        let (kx, ky, kz) = AXES[P];
         let o = self.origin;
-        let (kx, ky, kz) = (self.kx, self.ky, self.kz);
         let a = [v[0] - o[0], v[1] - o[1], v[2] - o[2]];
         let b = [v[3] - o[0], v[4] - o[1], v[5] - o[2]];
         let c = [v[6] - o[0], v[7] - o[1], v[8] - o[2]];
-        let ax = a[kx] - self.sx * a[kz];
-        let ay = a[ky] - self.sy * a[kz];
-        let bx = b[kx] - self.sx * b[kz];
-        let by = b[ky] - self.sy * b[kz];
-        let cx = c[kx] - self.sx * c[kz];
-        let cy = c[ky] - self.sy * c[kz];
-        let mut u = cx * by - cy * bx;
-        let mut vv = ax * cy - ay * cx;
-        let mut w = bx * ay - by * ax;
-        if u == 0.0 || vv == 0.0 || w == 0.0 {
-            let (axd, ayd, bxd, byd, cxd, cyd) = (
-                ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-            );
-            u = (cxd * byd - cyd * bxd) as f32;
-            vv = (axd * cyd - ayd * cxd) as f32;
-            w = (bxd * ayd - byd * axd) as f32;
-            // The f64 results are exact in sign; a value that rounds to zero in f32 is kept as
-            // the smallest subnormal with the right sign.
-            let fix = |e: f32, exact: f64| {
-                if e == 0.0 && exact != 0.0 {
-                    f32::from_bits(1).copysign(exact.signum() as f32)
-                } else {
-                    e
-                }
-            };
-            u = fix(u, cxd * byd - cyd * bxd);
-            vv = fix(vv, axd * cyd - ayd * cxd);
-            w = fix(w, bxd * ayd - byd * axd);
+        let s = Sheared {
+            x: [
+                a[kx] - self.sx * a[kz],
+                b[kx] - self.sx * b[kz],
+                c[kx] - self.sx * c[kz],
+            ],
+            y: [
+                a[ky] - self.sy * a[kz],
+                b[ky] - self.sy * b[kz],
+                c[ky] - self.sy * c[kz],
+            ],
+            z: [a[kz], b[kz], c[kz]],
+        };
+        let [ax, bx, cx] = s.x;
+        let [ay, by, cy] = s.y;
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        if u == 0.0 || v == 0.0 || w == 0.0 {
+            return self.on_edge(&s);
         }
-        if (u < 0.0 || vv < 0.0 || w < 0.0) && (u > 0.0 || vv > 0.0 || w > 0.0) {
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
         }
-        let det = u + vv + w;
+        self.hit(&s, u, v, w)
+    }
+
+    /// The rare case of an edge function that is zero in f32: recomputed exactly, and when it
+    /// is exactly zero the point is on the edge and the top-left rule decides.
+    #[cold]
+    #[inline(never)]
+    fn on_edge(&self, s: &Sheared) -> Option<TriangleHit> {
+        let [ax, bx, cx] = s.x.map(f64::from);
+        let [ay, by, cy] = s.y.map(f64::from);
+        let exact = [cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax];
+        // The f64 results are exact in sign; a value that rounds to zero in f32 is kept as
+        // the smallest subnormal with the right sign.
+        let [u, v, w] = exact.map(|e| {
+            let f = e as f32;
+            if f == 0.0 && e != 0.0 {
+                f32::from_bits(1).copysign(e.signum() as f32)
+            } else {
+                f
+            }
+        });
+        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+            return None;
+        }
+        let det = u + v + w;
         if det == 0.0 {
             return None;
         }
-        if u == 0.0 || vv == 0.0 || w == 0.0 {
-            let s = if det > 0.0 { 1.0f64 } else { -1.0 };
-            // Edge opposite each vertex, in the cyclic order b->c, c->a, a->b.
-            let owns = |e0: f64, e1: f64| {
-                let (ex, ey) = (s * e0, s * e1);
-                ey > 0.0 || (ey == 0.0 && ex > 0.0)
-            };
-            if u == 0.0 && !owns(cx as f64 - bx as f64, cy as f64 - by as f64) {
-                return None;
-            }
-            if vv == 0.0 && !owns(ax as f64 - cx as f64, ay as f64 - cy as f64) {
-                return None;
-            }
-            if w == 0.0 && !owns(bx as f64 - ax as f64, by as f64 - ay as f64) {
-                return None;
-            }
+        let sign = if det > 0.0 { 1.0f64 } else { -1.0 };
+        // Edge opposite each vertex, in the cyclic order b->c, c->a, a->b.
+        let owns = |e0: f64, e1: f64| {
+            let (ex, ey) = (sign * e0, sign * e1);
+            ey > 0.0 || (ey == 0.0 && ex > 0.0)
+        };
+        if u == 0.0 && !owns(cx - bx, cy - by) {
+            return None;
         }
-        let az = self.sz * a[kz];
-        let bz = self.sz * b[kz];
-        let cz = self.sz * c[kz];
-        let t_scaled = u * az + vv * bz + w * cz;
-        let rcp = 1.0 / det;
+        if v == 0.0 && !owns(ax - cx, ay - cy) {
+            return None;
+        }
+        if w == 0.0 && !owns(bx - ax, by - ay) {
+            return None;
+        }
+        self.hit(s, u, v, w)
+    }
+
+    /// The hit of a ray inside the triangle with edge functions `u, v, w`.
+    #[inline(always)]
+    fn hit(&self, s: &Sheared, u: f32, v: f32, w: f32) -> Option<TriangleHit> {
+        let det = u + v + w;
+        if det == 0.0 {
+            return None;
+        }
+        let [az, bz, cz] = [self.sz * s.z[0], self.sz * s.z[1], self.sz * s.z[2]];
+        let t_scaled = u * az + v * bz + w * cz;
         let t = t_scaled / det; // one rounding, not two: the spec asks for as much precision as possible
         if t.is_nan() {
             return None;
         }
+        let rcp = 1.0 / det;
         Some(TriangleHit {
             t,
-            b: vv * rcp,
+            b: v * rcp,
             c: w * rcp,
             front_face: det > 0.0,
         })
