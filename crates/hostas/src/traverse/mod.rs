@@ -117,24 +117,20 @@ impl Ray {
                 "SkipTriangles and SkipAABBs must not both be set",
             );
         }
-        let cull = [
-            RayFlags::SKIP_TRIANGLES,
-            RayFlags::CULL_BACK_FACING_TRIANGLES,
-            RayFlags::CULL_FRONT_FACING_TRIANGLES,
-        ];
-        if cull.iter().filter(|&&c| f.contains(c)).count() > 1 {
+        let cull = RayFlags::SKIP_TRIANGLES.0
+            | RayFlags::CULL_BACK_FACING_TRIANGLES.0
+            | RayFlags::CULL_FRONT_FACING_TRIANGLES.0;
+        if (f.0 & cull).count_ones() > 1 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06890",
                 "at most one of SkipTriangles, CullBackFacingTriangles and CullFrontFacingTriangles may be set",
             );
         }
-        let opacity = [
-            RayFlags::OPAQUE,
-            RayFlags::NO_OPAQUE,
-            RayFlags::CULL_OPAQUE,
-            RayFlags::CULL_NO_OPAQUE,
-        ];
-        if opacity.iter().filter(|&&c| f.contains(c)).count() > 1 {
+        let opacity = RayFlags::OPAQUE.0
+            | RayFlags::NO_OPAQUE.0
+            | RayFlags::CULL_OPAQUE.0
+            | RayFlags::CULL_NO_OPAQUE.0;
+        if (f.0 & opacity).count_ones() > 1 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06891",
                 "at most one of Opaque, NoOpaque, CullOpaque and CullNoOpaque may be set",
