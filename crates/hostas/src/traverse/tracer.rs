@@ -7,9 +7,7 @@
 //! candidates are not materialized, and the ids of the hit are looked up once at the end.
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
-use super::query::{
-    BoxRay, Entry, STACK_CAPACITY, opacity_culled, push_hit_children, resolve_opacity,
-};
+use super::query::{BoxRay, Entry, STACK_CAPACITY, opacity_culled, resolve_opacity};
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
@@ -230,7 +228,7 @@ fn descend(
     t_max: f32,
 ) -> Option<Entry> {
     let node = nodes.get(index as usize)?;
-    let (mask, t) = ray.node(node, t_min, t_max);
+    let (mut mask, t) = ray.node(node, t_min, t_max);
     if mask == 0 {
         return None;
     }
@@ -242,14 +240,34 @@ fn descend(
             t: t[k],
         });
     }
-    push_hit_children(node, mask, &t, |e| {
+    // Insertion-sort the hit children straight onto the stack, farthest deepest; the
+    // nearest ends on top and is returned instead of pushed.
+    let start = *sp;
+    let mut end = start;
+    while mask != 0 {
+        let k = mask.trailing_zeros() as usize;
+        mask &= mask - 1;
+        let e = Entry {
+            child: node.child[k],
+            count: node.count[k] as u32,
+            t: t[k],
+        };
         // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
-        if let Some(slot) = stack.get_mut(*sp) {
-            *slot = e;
-            *sp += 1;
+        let Some(region) = stack.get_mut(start..=end) else {
+            break;
+        };
+        let mut j = region.len() - 1;
+        while j > 0 && region[j - 1].t < e.t {
+            region[j] = region[j - 1];
+            j -= 1;
         }
-    });
-    *sp -= 1;
+        region[j] = e;
+        end += 1;
+    }
+    if end == start {
+        return None;
+    }
+    *sp = end - 1;
     stack.get(*sp).copied()
 }
 
