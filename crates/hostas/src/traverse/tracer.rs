@@ -137,7 +137,14 @@ impl<'s> Tracer<'s> {
                     let Some(bi) = self.scene.instance_blas_index(slot) else {
                         continue;
                     };
-                    let Some(view) = self.blas(bi) else { continue };
+                    // By reference into the cache: a view is a dozen slices, not worth copying
+                    // per instance.
+                    if self.cached.as_ref().is_none_or(|(i, _)| *i != bi) {
+                        self.cached = self.scene.blas_view(bi).map(|v| (bi, v));
+                    }
+                    let Some((_, view)) = &self.cached else {
+                        continue;
+                    };
                     let skip = match view.prim_kind {
                         PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
                         PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
@@ -157,7 +164,7 @@ impl<'s> Tracer<'s> {
                         (BoxRay::new(o, d), ShearedRay::new(o, d))
                     };
                     let at = BlasAt {
-                        view: &view,
+                        view,
                         inst,
                         slot,
                         blas: bi,
