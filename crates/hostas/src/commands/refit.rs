@@ -132,39 +132,17 @@ fn triangle_box(v: &[f32; 9]) -> Aabb {
     b
 }
 
-/// [`crate::math::fmin`] on four lanes (one `minps`).
-#[inline(always)]
-fn min4(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-    use crate::math::fmin;
-    [
-        fmin(a[0], b[0]),
-        fmin(a[1], b[1]),
-        fmin(a[2], b[2]),
-        fmin(a[3], b[3]),
-    ]
-}
-
-/// [`crate::math::fmax`] on four lanes (one `maxps`).
-#[inline(always)]
-fn max4(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-    use crate::math::fmax;
-    [
-        fmax(a[0], b[0]),
-        fmax(a[1], b[1]),
-        fmax(a[2], b[2]),
-        fmax(a[3], b[3]),
-    ]
-}
-
 /// One `R32G32B32_SFLOAT` triangle geometry without a transform, with `IDX`-byte indices
-/// (0: none), vertices `TIGHT`ly packed (stride 12) or not; the per-geometry checks are done
-/// once, up front.
+/// (0: none) and vertices `TIGHT`ly packed (stride 12) or not; the per-geometry checks are
+/// done once, up front.
 struct TriF32<'a, const IDX: usize, const TIGHT: bool> {
-    /// The range's indices, exactly `3 * primitiveCount` of them (indexed geometries).
-    index: &'a [u8],
-    /// `TIGHT`: the vertices, as 12-byte records.
-    tight: &'a [[u8; 12]],
+    /// The range's indices, exactly `primitiveCount` triples (as `IDX` says).
+    index4: &'a [[u8; 12]],
+    index2: &'a [[u8; 6]],
+    /// From the first byte vertex 0 is read at; holds every vertex up to maxVertex.
     verts: &'a [u8],
+    /// `TIGHT`: vertices 0 to maxVertex, exactly.
+    verts12: &'a [[u8; 12]],
     stride: usize,
     first_vertex: usize,
     max_vertex: usize,
@@ -174,13 +152,25 @@ struct TriF32<'a, const IDX: usize, const TIGHT: bool> {
 }
 
 impl<'a, const IDX: usize, const TIGHT: bool> TriF32<'a, IDX, TIGHT> {
-    /// `l.index_data` must hold the range's indices.
+    /// `l.index_data` must hold the range's indices and `l.vertex_data` every vertex up to
+    /// maxVertex.
     fn new(l: &F32Layout<'a>, first: u32, count: u32) -> Self {
-        let tight_len = l.vertex_data.len() / 12 * 12;
+        let n = count as usize;
+        let (index4, index2) = match IDX {
+            4 => (bytemuck::cast_slice(&l.index_data[..12 * n]), &[][..]),
+            2 => (&[][..], bytemuck::cast_slice(&l.index_data[..6 * n])),
+            _ => (&[][..], &[][..]),
+        };
+        let verts12 = if TIGHT {
+            bytemuck::cast_slice(&l.vertex_data[..12 * (l.max_vertex + 1)])
+        } else {
+            &[][..]
+        };
         TriF32 {
-            index: &l.index_data[..(3 * IDX * count as usize).min(l.index_data.len())],
-            tight: bytemuck::cast_slice(&l.vertex_data[..tight_len]),
+            index4,
+            index2,
             verts: l.vertex_data,
+            verts12,
             stride: l.vertex_stride,
             first_vertex: l.first_vertex,
             max_vertex: l.max_vertex,
@@ -189,55 +179,51 @@ impl<'a, const IDX: usize, const TIGHT: bool> TriF32<'a, IDX, TIGHT> {
         }
     }
 
-    /// Vertex `v` (first vertex added), in lanes x, y, z, x.
+    /// Vertex `v` (first vertex added, at most maxVertex).
     #[inline(always)]
-    fn vertex(&self, v: usize) -> Option<[f32; 4]> {
+    fn vertex(&self, v: usize) -> Option<[f32; 3]> {
         let b: &[u8; 12] = if TIGHT {
-            self.tight.get(v)?
+            self.verts12.get(v)?
         } else {
             let at = v * self.stride;
-            self.verts.get(at..at + 12)?.try_into().ok()?
+            self.verts.get(at..at.wrapping_add(12))?.try_into().ok()?
         };
-        let x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
-        // (The fourth lane repeats x: a value the compiler cannot fold, so the box updates
-        // stay whole-register `minps`/`maxps`.)
-        Some([
-            x,
-            f32::from_le_bytes([b[4], b[5], b[6], b[7]]),
-            f32::from_le_bytes([b[8], b[9], b[10], b[11]]),
-            x,
-        ])
+        let f = |k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
+        Some([f(0), f(1), f(2)])
     }
 
-    /// Triangle `id`'s three vertices, in lanes x, y, z, x.
+    /// Triangle `id`'s three vertices.
     #[inline(always)]
-    fn triangle(&self, id: u32) -> Option<[[f32; 4]; 3]> {
-        let p = id.wrapping_sub(self.first);
-        if p >= self.count {
-            return None;
-        }
-        let p = p as usize;
+    fn triangle(&self, id: u32) -> Option<[[f32; 3]; 3]> {
+        let p = id.wrapping_sub(self.first) as usize;
         let fv = self.first_vertex;
         let idx: [usize; 3] = match IDX {
-            0 => [3 * p + fv, 3 * p + 1 + fv, 3 * p + 2 + fv],
             4 => {
-                let b: &[u8; 12] = self.index.get(12 * p..12 * p + 12)?.try_into().ok()?;
+                let b = self.index4.get(p)?;
                 [
                     u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize + fv,
                     u32::from_le_bytes([b[4], b[5], b[6], b[7]]) as usize + fv,
                     u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize + fv,
                 ]
             }
-            _ => {
-                let b: &[u8; 6] = self.index.get(6 * p..6 * p + 6)?.try_into().ok()?;
+            2 => {
+                let b = self.index2.get(p)?;
                 [
                     u16::from_le_bytes([b[0], b[1]]) as usize + fv,
                     u16::from_le_bytes([b[2], b[3]]) as usize + fv,
                     u16::from_le_bytes([b[4], b[5]]) as usize + fv,
                 ]
             }
+            _ => {
+                if p >= self.count as usize {
+                    return None;
+                }
+                [3 * p + fv, 3 * p + 1 + fv, 3 * p + 2 + fv]
+            }
         };
-        if idx[0].max(idx[1]).max(idx[2]) > self.max_vertex {
+        // (`TIGHT`: the same test, in the form that lets the compiler drop the bounds checks.)
+        let max = idx[0].max(idx[1]).max(idx[2]);
+        if (TIGHT && max >= self.verts12.len()) || (!TIGHT && max > self.max_vertex) {
             return None;
         }
         let v = [
@@ -245,7 +231,8 @@ impl<'a, const IDX: usize, const TIGHT: bool> TriF32<'a, IDX, TIGHT> {
             self.vertex(idx[1])?,
             self.vertex(idx[2])?,
         ];
-        if v[0][0].is_nan() || v[1][0].is_nan() || v[2][0].is_nan() {
+        // Inactive (the general path reports it).
+        if v[0][0].is_nan() | v[1][0].is_nan() | v[2][0].is_nan() {
             return None;
         }
         Some(v)
@@ -261,22 +248,37 @@ impl<const IDX: usize, const TIGHT: bool> Source for TriF32<'_, IDX, TIGHT> {
         Some((f, triangle_box(&f)))
     }
 
-    /// The same operations as the default, on four lanes.
-    #[inline(never)]
+    /// The same operations as the default, in a loop of its own.
+    #[inline(always)]
     fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Aabb> {
-        let mut lo = [f32::INFINITY; 4];
-        let mut hi = [f32::NEG_INFINITY; 4];
-        for (o, &id) in out.iter_mut().zip(ids) {
-            let [a, b, c] = self.triangle(id)?;
-            *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-            // Aabb::point(a), grow(b), grow(c), then the union with the leaf's box so far.
-            lo = min4(lo, min4(min4(a, b), c));
-            hi = max4(hi, max4(max4(a, b), c));
-        }
+        let (lo, hi) = self.leaf_box(ids, out)?;
         Some(Aabb {
             lo: [lo[0], lo[1], lo[2]],
             hi: [hi[0], hi[1], hi[2]],
         })
+    }
+}
+
+impl<const IDX: usize, const TIGHT: bool> TriF32<'_, IDX, TIGHT> {
+    /// [`Source::leaf`], the box as two four-lane arrays. (Six scalars and this return type
+    /// keep the compiler from vectorizing the minima into compare-and-blend sequences.)
+    #[inline(never)]
+    fn leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
+        use crate::math::{fmax, fmin};
+        let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
+        let (mut hx, mut hy, mut hz) = (f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for (o, &id) in out.iter_mut().zip(ids) {
+            let [a, b, c] = self.triangle(id)?;
+            *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+            // Aabb::point(a), grow(b), grow(c), then the union with the leaf's box so far.
+            lx = fmin(lx, fmin(fmin(a[0], b[0]), c[0]));
+            ly = fmin(ly, fmin(fmin(a[1], b[1]), c[1]));
+            lz = fmin(lz, fmin(fmin(a[2], b[2]), c[2]));
+            hx = fmax(hx, fmax(fmax(a[0], b[0]), c[0]));
+            hy = fmax(hy, fmax(fmax(a[1], b[1]), c[1]));
+            hz = fmax(hz, fmax(fmax(a[2], b[2]), c[2]));
+        }
+        Some(([lx, ly, lz, 0.0], [hx, hy, hz, 0.0]))
     }
 }
 
