@@ -13,8 +13,7 @@ use crate::layout::encode::{self, HeaderFields};
 use crate::layout::plan::{self, Plan};
 use crate::layout::view::{self, View};
 use crate::layout::{
-    EMPTY_CHILD, GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord,
-    Kind, LEAF_BIT, Node, PrimKind,
+    GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord, Kind, PrimKind,
 };
 use crate::math::{Aabb, Affine};
 use ash::vk;
@@ -40,7 +39,7 @@ fn build_scratch_size(k: PrimKind, n: u64) -> u64 {
 }
 
 /// One geometry's reader.
-enum Reader<'a> {
+pub(super) enum Reader<'a> {
     Triangles(TriangleReader<'a>),
     Aabbs(AabbReader<'a>),
     Instances(InstanceReader<'a>),
@@ -695,7 +694,7 @@ impl Device {
             })?;
             check_update_geometries(view.geometries, &records, at)?;
             let header = *view.header;
-            refit(bytes, &header, prim_kind, &readers, &instance_updates, at)
+            super::refit::refit(bytes, &header, prim_kind, &readers, &instance_updates, at)
         })
     }
 }
@@ -918,195 +917,5 @@ fn check_update_geometries(
             "firstVertex (indexed triangles)",
         )?;
     }
-    Ok(())
-}
-
-/// Update: re-reads every primitive (index values included: the CTS changes them), rewrites
-/// the stored primitives, and refits the nodes bottom-up (children come after parents in the
-/// depth-first order, so one reverse pass suffices).
-fn refit(
-    bytes: &mut [u8],
-    h: &Header,
-    prim_kind: PrimKind,
-    readers: &[Reader],
-    instances: &[(InstanceRecord, Aabb)],
-    at: Location,
-) -> Result<()> {
-    let n = h.stored_count as usize;
-    let geoms: Vec<GeometryRecord> = bytemuck::pod_collect_to_vec(
-        &bytes[h.geometries_offset as usize
-            ..h.geometries_offset as usize
-                + crate::layout::GEOMETRY_RECORD_SIZE as usize * h.geometry_count as usize],
-    );
-    let ids: Vec<u32> = bytemuck::pod_collect_to_vec(
-        &bytes[h.prim_ids_offset as usize..h.prim_ids_offset as usize + 4 * n],
-    );
-    let locate = |id: u32| {
-        let g = geoms
-            .partition_point(|r| r.first_primitive <= id)
-            .saturating_sub(1);
-        (g, id - geoms[g].first_primitive)
-    };
-    // New bounds per stored primitive.
-    let mut bounds = vec![Aabb::EMPTY; n];
-    let size = prim_kind.prim_size() as usize;
-    let prims = &mut bytes[h.prims_offset as usize..h.prims_offset as usize + size * n];
-    match prim_kind {
-        PrimKind::Triangles | PrimKind::Aabbs => {
-            // Primitives not stored were inactive and must still be (VUID-03663).
-            if n < h.primitive_count as usize {
-                let mut stored = vec![false; h.primitive_count as usize];
-                for &id in &ids {
-                    stored[id as usize] = true;
-                }
-                for (g, r) in readers.iter().enumerate() {
-                    let first = geoms[g].first_primitive;
-                    let count = match r {
-                        Reader::Triangles(t) => t.primitive_count,
-                        Reader::Aabbs(a) => a.primitive_count,
-                        Reader::Instances(_) => 0,
-                    };
-                    for i in (0..count).filter(|&i| !stored[(first + i) as usize]) {
-                        let active = match r {
-                            Reader::Triangles(t) => t.triangle(i)?.is_some(),
-                            Reader::Aabbs(a) => a.aabb(i)?.is_some(),
-                            Reader::Instances(_) => false,
-                        };
-                        if active {
-                            return Err(Error::vuid(
-                                "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
-                                at.geometry(g).primitive(i),
-                                "an inactive primitive became active in an update",
-                            ));
-                        }
-                    }
-                }
-            }
-            // One result per chunk (the first error in it), so the error reported is the first
-            // in primitive order whatever the thread count.
-            const CHUNK: usize = 2048;
-            let one = |out: &mut [u8], b: &mut Aabb, id: u32| -> Result<()> {
-                let (g, p) = locate(id);
-                let at = at.geometry(g).primitive(p);
-                let inactive = || {
-                    Error::vuid(
-                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03664",
-                        at,
-                        "an active primitive became inactive in an update",
-                    )
-                };
-                match &readers[g] {
-                    Reader::Triangles(t) => {
-                        let f = match t.triangle_fast(p) {
-                            Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
-                            _ => {
-                                let v = t.triangle(p)?.ok_or_else(inactive)?;
-                                [
-                                    v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0],
-                                    v[2][1], v[2][2],
-                                ]
-                            }
-                        };
-                        out.copy_from_slice(bytemuck::cast_slice(&f));
-                        let mut bb = Aabb::point([f[0], f[1], f[2]]);
-                        bb.grow([f[3], f[4], f[5]]);
-                        bb.grow([f[6], f[7], f[8]]);
-                        *b = bb;
-                    }
-                    Reader::Aabbs(a) => {
-                        let bb = a.aabb(p)?.ok_or_else(inactive)?;
-                        out.copy_from_slice(bytemuck::cast_slice(&[
-                            bb.lo[0], bb.lo[1], bb.lo[2], bb.hi[0], bb.hi[1], bb.hi[2],
-                        ]));
-                        *b = bb;
-                    }
-                    Reader::Instances(_) => {}
-                }
-                Ok(())
-            };
-            let results: Vec<Result<()>> = prims
-                .par_chunks_mut(size * CHUNK)
-                .zip(bounds.par_chunks_mut(CHUNK))
-                .zip(ids.par_chunks(CHUNK))
-                .map(|((out, b), ids)| {
-                    for ((o, bb), &id) in out.chunks_exact_mut(size).zip(b.iter_mut()).zip(ids) {
-                        one(o, bb, id)?;
-                    }
-                    Ok(())
-                })
-                .collect();
-            for r in results {
-                r?;
-            }
-        }
-        PrimKind::Instances => {
-            // New instances by instance index; every stored one must still be active, and no
-            // other may have become active.
-            let mut by_id: Vec<Option<usize>> = vec![None; h.primitive_count as usize];
-            for (k, (r, _)) in instances.iter().enumerate() {
-                if let Some(s) = by_id.get_mut(r.instance_id as usize) {
-                    *s = Some(k);
-                }
-            }
-            let mut used = vec![false; instances.len()];
-            let recs: &mut [InstanceRecord] = bytemuck::try_cast_slice_mut(prims)
-                .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
-            for (slot, rec) in recs.iter_mut().enumerate() {
-                let id = ids[slot];
-                let Some(k) = by_id.get(id as usize).copied().flatten() else {
-                    return Err(Error::vuid(
-                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03664",
-                        at.geometry(0).primitive(id),
-                        "an active instance became inactive in an update",
-                    ));
-                };
-                used[k] = true;
-                *rec = instances[k].0;
-                bounds[slot] = instances[k].1;
-            }
-            if let Some(k) = used.iter().position(|u| !u) {
-                return Err(Error::vuid(
-                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
-                    at.geometry(0).primitive(instances[k].0.instance_id),
-                    "an inactive instance became active in an update",
-                ));
-            }
-        }
-        PrimKind::None => {}
-    }
-    // Refit: leaves from primitive bounds, inner children from their node's children.
-    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(
-        &mut bytes[h.nodes_offset as usize
-            ..h.nodes_offset as usize + crate::layout::NODE_SIZE as usize * h.node_count as usize],
-    )
-    .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
-    let mut root = Aabb::EMPTY;
-    for i in (0..nodes.len()).rev() {
-        for k in 0..crate::layout::WIDTH {
-            let c = nodes[i].child[k];
-            if c == EMPTY_CHILD {
-                continue;
-            }
-            let b = if c & LEAF_BIT != 0 {
-                let first = (c & !LEAF_BIT) as usize;
-                let count = nodes[i].count[k] as usize;
-                bounds[first..first + count]
-                    .iter()
-                    .fold(Aabb::EMPTY, |a, b| a.union(b))
-            } else {
-                let child = &nodes[c as usize];
-                (0..crate::layout::WIDTH)
-                    .filter(|&j| child.child[j] != EMPTY_CHILD)
-                    .fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
-            };
-            nodes[i].set_bounds(k, &b);
-            if i == 0 {
-                root = root.union(&b);
-            }
-        }
-    }
-    let mut header = *h;
-    header.bounds = root;
-    bytes[..256].copy_from_slice(bytemuck::bytes_of(&header));
     Ok(())
 }

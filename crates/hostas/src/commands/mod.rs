@@ -3,6 +3,7 @@
 
 pub mod build;
 pub mod copy;
+mod refit;
 mod validate;
 
 pub use build::BuildSizes;

@@ -10,6 +10,19 @@ use crate::error::{Error, Location, Result};
 use crate::math::{Affine, Vec3};
 use ash::vk;
 
+/// An `R32G32B32_SFLOAT` geometry's bytes, from [`TriangleReader::f32_layout`].
+#[derive(Clone, Copy, Debug)]
+pub struct F32Layout<'a> {
+    /// 0 (no indices), 2 or 4.
+    pub index_size: usize,
+    pub index_data: &'a [u8],
+    pub vertex_data: &'a [u8],
+    pub vertex_stride: usize,
+    pub first_vertex: usize,
+    pub max_vertex: usize,
+    pub transform: Option<Affine>,
+}
+
 /// A validated view of one triangle geometry's range, ready to decode triangle `i`.
 #[derive(Clone, Copy, Debug)]
 pub struct TriangleReader<'a> {
@@ -158,6 +171,38 @@ impl<'a> TriangleReader<'a> {
 
     pub fn format(&self) -> VertexFormatInfo {
         self.format
+    }
+
+    /// The geometry's bytes as [`Self::triangle_fast`] reads them, for decoders that hoist the
+    /// per-geometry setup out of their loop: `None` unless the vertex format is
+    /// `R32G32B32_SFLOAT`. `index_data` starts at `primitiveOffset` (indexed geometries) and
+    /// `vertex_data` at the first byte a vertex index counts from (`primitiveOffset` for
+    /// non-indexed geometries); either may be shorter than the range needs.
+    pub fn f32_layout(&self) -> Option<F32Layout<'a>> {
+        if self.format.format != vk::Format::R32G32B32_SFLOAT {
+            return None;
+        }
+        let start = |b: &'a [u8], at: u64| b.get(usize::try_from(at).ok()?..);
+        let (index_data, vertex_data) = if self.index_size == 0 {
+            (
+                &[][..],
+                start(self.data.vertex_data, self.primitive_offset)?,
+            )
+        } else {
+            (
+                start(self.data.index_data?, self.primitive_offset)?,
+                self.data.vertex_data,
+            )
+        };
+        Some(F32Layout {
+            index_size: self.index_size as usize,
+            index_data,
+            vertex_data,
+            vertex_stride: usize::try_from(self.data.vertex_stride).ok()?,
+            first_vertex: usize::try_from(self.first_vertex).ok()?,
+            max_vertex: self.data.max_vertex as usize,
+            transform: self.transform,
+        })
     }
 
     /// The three vertex indices of triangle `i`, `firstVertex` included.

@@ -1,0 +1,1237 @@
+//! Update (`mode = UPDATE`): re-reads every primitive through the application's buffers (index
+//! values included: the CTS changes them between build and update, so nothing is cached from
+//! the build), rewrites the stored primitives and refits every node's bounds.
+//!
+//! The fast path walks the tree depth-first in one pass: each leaf decodes its primitives
+//! straight from the application's bytes into the stored primitive section while computing
+//! the leaf's box, and each node's boxes are set once its children are done; large subtrees
+//! run in parallel. It relies on the layout the encoder writes (nodes in depth-first preorder,
+//! primitives in leaf order) and checks it as it goes. Anything it does not expect (an
+//! invalid primitive, an unusual layout) makes it give up, and the general path below redoes
+//! the whole update from the start: it reports the first error in stored order, exactly as
+//! before, and handles any layout [`View::parse`](crate::layout::view::View::parse) accepts.
+//! Both paths compute every box with the same operations in the same order, so the bytes
+//! written do not depend on the path taken or the thread count.
+
+use super::build::Reader;
+use crate::error::{Error, Location, Result};
+use crate::input::aabbs::AabbReader;
+use crate::input::triangles::{F32Layout, TriangleReader};
+use crate::layout::{
+    EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
+    NODE_SIZE, Node, PrimKind, WIDTH,
+};
+use crate::math::Aabb;
+use rayon::prelude::*;
+
+/// Refits the structure in `bytes` (already validated by `View::parse`; `h` is its header).
+pub(super) fn refit(
+    bytes: &mut [u8],
+    h: &Header,
+    prim_kind: PrimKind,
+    readers: &[Reader],
+    instances: &[(InstanceRecord, Aabb)],
+    at: Location,
+) -> Result<()> {
+    if matches!(prim_kind, PrimKind::Triangles | PrimKind::Aabbs) {
+        check_still_inactive(bytes, h, readers, at)?;
+        if let Some(root) = fused(bytes, h, prim_kind, readers) {
+            let mut header = *h;
+            header.bounds = root;
+            bytes[..256].copy_from_slice(bytemuck::bytes_of(&header));
+            return Ok(());
+        }
+    }
+    general(bytes, h, prim_kind, readers, instances, at)
+}
+
+fn misaligned(e: bytemuck::PodCastError) -> Error {
+    Error::NotSupported(format!("alignment: {e}"))
+}
+
+/// The stored primitive ids, in place.
+fn prim_ids<'b>(bytes: &'b [u8], h: &Header) -> Result<&'b [u32]> {
+    let start = h.prim_ids_offset as usize;
+    bytemuck::try_cast_slice(&bytes[start..start + 4 * h.stored_count as usize]).map_err(misaligned)
+}
+
+/// The geometry records, in place.
+fn geometry_records<'b>(bytes: &'b [u8], h: &Header) -> Result<&'b [GeometryRecord]> {
+    let start = h.geometries_offset as usize;
+    let len = GEOMETRY_RECORD_SIZE as usize * h.geometry_count as usize;
+    bytemuck::try_cast_slice(&bytes[start..start + len]).map_err(misaligned)
+}
+
+/// VUID-03663: the primitives that are not stored were inactive and must still be. Checked
+/// first, in primitive order, and only when some primitive is not stored.
+fn check_still_inactive(bytes: &[u8], h: &Header, readers: &[Reader], at: Location) -> Result<()> {
+    if h.stored_count >= h.primitive_count {
+        return Ok(());
+    }
+    let ids = prim_ids(bytes, h)?;
+    let geoms = geometry_records(bytes, h)?;
+    let mut stored = vec![false; h.primitive_count as usize];
+    for &id in ids {
+        stored[id as usize] = true;
+    }
+    for (g, r) in readers.iter().enumerate() {
+        let first = geoms[g].first_primitive;
+        let count = match r {
+            Reader::Triangles(t) => t.primitive_count,
+            Reader::Aabbs(a) => a.primitive_count,
+            Reader::Instances(_) => 0,
+        };
+        for i in (0..count).filter(|&i| !stored[(first + i) as usize]) {
+            let active = match r {
+                Reader::Triangles(t) => t.triangle(i)?.is_some(),
+                Reader::Aabbs(a) => a.aabb(i)?.is_some(),
+                Reader::Instances(_) => false,
+            };
+            if active {
+                return Err(Error::vuid(
+                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
+                    at.geometry(g).primitive(i),
+                    "an inactive primitive became active in an update",
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+// ---------------------------------------------------------------------------------------------
+// Fast path.
+
+/// Decodes primitives (by sequence number) into their stored form and boxes. `None` for
+/// anything but valid, active primitives: the caller gives up and the general path reports
+/// what is wrong.
+trait Source: Sync {
+    type Prim: bytemuck::Pod + Send;
+    fn get(&self, id: u32) -> Option<(Self::Prim, Aabb)>;
+
+    /// Decodes a leaf's primitives (ids `ids`) into `out`; returns the leaf's box: the union,
+    /// in order from [`Aabb::EMPTY`], of the primitives' boxes.
+    #[inline(always)]
+    fn leaf(&self, ids: &[u32], out: &mut [Self::Prim]) -> Option<Aabb> {
+        let mut b = Aabb::EMPTY;
+        for (o, &id) in out.iter_mut().zip(ids) {
+            let (p, pb) = self.get(id)?;
+            *o = p;
+            b = b.union(&pb);
+        }
+        Some(b)
+    }
+}
+
+/// A triangle's box, as the general path computes it.
+#[inline(always)]
+fn triangle_box(v: &[f32; 9]) -> Aabb {
+    let mut b = Aabb::point([v[0], v[1], v[2]]);
+    b.grow([v[3], v[4], v[5]]);
+    b.grow([v[6], v[7], v[8]]);
+    b
+}
+
+/// One `R32G32B32_SFLOAT` triangle geometry without a transform, with `IDX`-byte indices
+/// (0: none) and vertices `TIGHT`ly packed (stride 12) or not; the per-geometry checks are
+/// done once, up front.
+struct TriF32<'a, const IDX: usize, const TIGHT: bool> {
+    /// The range's indices, exactly `primitiveCount` triples (as `IDX` says).
+    index4: &'a [[u8; 12]],
+    index2: &'a [[u8; 6]],
+    /// From the first byte vertex 0 is read at; holds every vertex up to maxVertex.
+    verts: &'a [u8],
+    /// `TIGHT`: vertices 0 to maxVertex, exactly.
+    verts12: &'a [[u8; 12]],
+    stride: usize,
+    first_vertex: usize,
+    max_vertex: usize,
+    /// The geometry's first primitive sequence number, and its primitive count.
+    first: u32,
+    count: u32,
+}
+
+impl<'a, const IDX: usize, const TIGHT: bool> TriF32<'a, IDX, TIGHT> {
+    /// `l.index_data` must hold the range's indices and `l.vertex_data` every vertex up to
+    /// maxVertex.
+    fn new(l: &F32Layout<'a>, first: u32, count: u32) -> Self {
+        let n = count as usize;
+        let (index4, index2) = match IDX {
+            4 => (bytemuck::cast_slice(&l.index_data[..12 * n]), &[][..]),
+            2 => (&[][..], bytemuck::cast_slice(&l.index_data[..6 * n])),
+            _ => (&[][..], &[][..]),
+        };
+        let verts12 = if TIGHT {
+            bytemuck::cast_slice(&l.vertex_data[..12 * (l.max_vertex + 1)])
+        } else {
+            &[][..]
+        };
+        TriF32 {
+            index4,
+            index2,
+            verts: l.vertex_data,
+            verts12,
+            stride: l.vertex_stride,
+            first_vertex: l.first_vertex,
+            max_vertex: l.max_vertex,
+            first,
+            count,
+        }
+    }
+
+    /// Vertex `v` (first vertex added, at most maxVertex).
+    #[inline(always)]
+    fn vertex(&self, v: usize) -> Option<[f32; 3]> {
+        let b: &[u8; 12] = if TIGHT {
+            self.verts12.get(v)?
+        } else {
+            let at = v * self.stride;
+            self.verts.get(at..at.wrapping_add(12))?.try_into().ok()?
+        };
+        let f = |k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
+        Some([f(0), f(1), f(2)])
+    }
+
+    /// Triangle `id`'s three vertices.
+    #[inline(always)]
+    fn triangle(&self, id: u32) -> Option<[[f32; 3]; 3]> {
+        let p = id.wrapping_sub(self.first) as usize;
+        let fv = self.first_vertex;
+        let idx: [usize; 3] = match IDX {
+            4 => {
+                let b = self.index4.get(p)?;
+                [
+                    u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize + fv,
+                    u32::from_le_bytes([b[4], b[5], b[6], b[7]]) as usize + fv,
+                    u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize + fv,
+                ]
+            }
+            2 => {
+                let b = self.index2.get(p)?;
+                [
+                    u16::from_le_bytes([b[0], b[1]]) as usize + fv,
+                    u16::from_le_bytes([b[2], b[3]]) as usize + fv,
+                    u16::from_le_bytes([b[4], b[5]]) as usize + fv,
+                ]
+            }
+            _ => {
+                if p >= self.count as usize {
+                    return None;
+                }
+                [3 * p + fv, 3 * p + 1 + fv, 3 * p + 2 + fv]
+            }
+        };
+        // (`TIGHT`: the same test, in the form that lets the compiler drop the bounds checks.)
+        let max = idx[0].max(idx[1]).max(idx[2]);
+        if (TIGHT && max >= self.verts12.len()) || (!TIGHT && max > self.max_vertex) {
+            return None;
+        }
+        let v = [
+            self.vertex(idx[0])?,
+            self.vertex(idx[1])?,
+            self.vertex(idx[2])?,
+        ];
+        // Inactive (the general path reports it).
+        if v[0][0].is_nan() | v[1][0].is_nan() | v[2][0].is_nan() {
+            return None;
+        }
+        Some(v)
+    }
+}
+
+impl<const IDX: usize, const TIGHT: bool> Source for TriF32<'_, IDX, TIGHT> {
+    type Prim = [f32; 9];
+    #[inline(always)]
+    fn get(&self, id: u32) -> Option<([f32; 9], Aabb)> {
+        let [a, b, c] = self.triangle(id)?;
+        let f = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+        Some((f, triangle_box(&f)))
+    }
+
+    /// The same operations as the default, in a loop of its own.
+    #[inline(always)]
+    fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Aabb> {
+        let (lo, hi) = self.leaf_box(ids, out)?;
+        Some(Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        })
+    }
+}
+
+impl<const IDX: usize, const TIGHT: bool> TriF32<'_, IDX, TIGHT> {
+    /// [`Source::leaf`], the box as two four-lane arrays. (Six scalars and this return type
+    /// keep the compiler from vectorizing the minima into compare-and-blend sequences.)
+    #[inline(never)]
+    fn leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
+        use crate::math::{fmax, fmin};
+        let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
+        let (mut hx, mut hy, mut hz) = (f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for (o, &id) in out.iter_mut().zip(ids) {
+            let [a, b, c] = self.triangle(id)?;
+            *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+            // Aabb::point(a), grow(b), grow(c), then the union with the leaf's box so far.
+            lx = fmin(lx, fmin(fmin(a[0], b[0]), c[0]));
+            ly = fmin(ly, fmin(fmin(a[1], b[1]), c[1]));
+            lz = fmin(lz, fmin(fmin(a[2], b[2]), c[2]));
+            hx = fmax(hx, fmax(fmax(a[0], b[0]), c[0]));
+            hy = fmax(hy, fmax(fmax(a[1], b[1]), c[1]));
+            hz = fmax(hz, fmax(fmax(a[2], b[2]), c[2]));
+        }
+        Some(([lx, ly, lz, 0.0], [hx, hy, hz, 0.0]))
+    }
+}
+
+/// Any triangle geometry, through the reader (what the general path does).
+fn reader_triangle(t: &TriangleReader, p: u32) -> Option<([f32; 9], Aabb)> {
+    if p >= t.primitive_count {
+        return None;
+    }
+    let f = match t.triangle_fast(p) {
+        Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+        _ => {
+            let v = t.triangle(p).ok()??;
+            [
+                v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2],
+            ]
+        }
+    };
+    Some((f, triangle_box(&f)))
+}
+
+fn reader_aabb(a: &AabbReader, p: u32) -> Option<([f32; 6], Aabb)> {
+    if p >= a.primitive_count {
+        return None;
+    }
+    let b = a.aabb(p).ok()??;
+    Some(([b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]], b))
+}
+
+/// One triangle geometry, decoder chosen at run time.
+enum AnyTri<'a> {
+    I0(TriF32<'a, 0, false>),
+    I2(TriF32<'a, 2, false>),
+    I4(TriF32<'a, 4, false>),
+    I0T(TriF32<'a, 0, true>),
+    I2T(TriF32<'a, 2, true>),
+    I4T(TriF32<'a, 4, true>),
+    Reader(&'a TriangleReader<'a>, u32),
+}
+
+impl<'a> AnyTri<'a> {
+    fn new(t: &'a TriangleReader<'a>, first: u32) -> Self {
+        // The fast decoders need every vertex up to maxVertex and every index in range; a
+        // geometry whose buffers are shorter goes through the reader, which says where.
+        let Some(l) = t.f32_layout() else {
+            return AnyTri::Reader(t, first);
+        };
+        let count = t.primitive_count;
+        let verts_ok = l
+            .max_vertex
+            .checked_mul(l.vertex_stride)
+            .and_then(|e| e.checked_add(12))
+            .is_some_and(|e| e <= l.vertex_data.len());
+        let index_ok = l.index_data.len() / 3 >= count as usize * l.index_size;
+        // (Transformed geometries are rare enough to go through the reader too.)
+        if !(verts_ok && index_ok) || l.transform.is_some() {
+            return AnyTri::Reader(t, first);
+        }
+        match (l.index_size, l.vertex_stride == 12) {
+            (0, false) => AnyTri::I0(TriF32::new(&l, first, count)),
+            (2, false) => AnyTri::I2(TriF32::new(&l, first, count)),
+            (4, false) => AnyTri::I4(TriF32::new(&l, first, count)),
+            (0, true) => AnyTri::I0T(TriF32::new(&l, first, count)),
+            (2, true) => AnyTri::I2T(TriF32::new(&l, first, count)),
+            (4, true) => AnyTri::I4T(TriF32::new(&l, first, count)),
+            _ => AnyTri::Reader(t, first),
+        }
+    }
+}
+
+impl Source for AnyTri<'_> {
+    type Prim = [f32; 9];
+    #[inline]
+    fn get(&self, id: u32) -> Option<([f32; 9], Aabb)> {
+        match self {
+            AnyTri::I0(d) => d.get(id),
+            AnyTri::I2(d) => d.get(id),
+            AnyTri::I4(d) => d.get(id),
+            AnyTri::I0T(d) => d.get(id),
+            AnyTri::I2T(d) => d.get(id),
+            AnyTri::I4T(d) => d.get(id),
+            AnyTri::Reader(t, first) => reader_triangle(t, id.wrapping_sub(*first)),
+        }
+    }
+}
+
+/// Several geometries: the one holding a sequence number is found by binary search.
+struct Multi<S> {
+    firsts: Vec<u32>,
+    geoms: Vec<S>,
+}
+
+impl<S: Source> Source for Multi<S> {
+    type Prim = S::Prim;
+    #[inline]
+    fn get(&self, id: u32) -> Option<(S::Prim, Aabb)> {
+        let g = self.firsts.partition_point(|&f| f <= id).checked_sub(1)?;
+        self.geoms.get(g)?.get(id)
+    }
+}
+
+struct AabbSource<'a> {
+    reader: &'a AabbReader<'a>,
+    first: u32,
+}
+
+impl Source for AabbSource<'_> {
+    type Prim = [f32; 6];
+    #[inline]
+    fn get(&self, id: u32) -> Option<([f32; 6], Aabb)> {
+        reader_aabb(self.reader, id.wrapping_sub(self.first))
+    }
+}
+
+/// The fast path; `None` when it gave up (nothing is reported, the general path takes over).
+/// Returns the root bounds.
+fn fused(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader]) -> Option<Aabb> {
+    let n = h.stored_count as usize;
+    let node_count = h.node_count as usize;
+    let (head, nodes_part) = bytes.split_at_mut(h.nodes_offset as usize);
+    let (head, ids_part) = head.split_at_mut(h.prim_ids_offset as usize);
+    let (head, prims_part) = head.split_at_mut(h.prims_offset as usize);
+    let geoms = geometry_records(head, h).ok()?;
+    let ids: &[u32] = bytemuck::try_cast_slice(ids_part.get(..4 * n)?).ok()?;
+    let nodes: &mut [Node] =
+        bytemuck::try_cast_slice_mut(nodes_part.get_mut(..NODE_SIZE as usize * node_count)?)
+            .ok()?;
+    if readers.len() != geoms.len() {
+        return None;
+    }
+    let firsts: Vec<u32> = geoms.iter().map(|g| g.first_primitive).collect();
+    match prim_kind {
+        PrimKind::Triangles => {
+            let prims: &mut [[f32; 9]] =
+                bytemuck::try_cast_slice_mut(prims_part.get_mut(..36 * n)?).ok()?;
+            let mut geoms = Vec::with_capacity(readers.len());
+            for (r, &first) in readers.iter().zip(&firsts) {
+                let Reader::Triangles(t) = r else { return None };
+                geoms.push(AnyTri::new(t, first));
+            }
+            if geoms.len() == 1 {
+                let tree = Tree { ids, nodes, prims };
+                match geoms.pop()? {
+                    AnyTri::I0(d) => tree.refit(&d),
+                    AnyTri::I2(d) => tree.refit(&d),
+                    AnyTri::I4(d) => tree.refit(&d),
+                    AnyTri::I0T(d) => tree.refit(&d),
+                    AnyTri::I2T(d) => tree.refit(&d),
+                    AnyTri::I4T(d) => tree.refit(&d),
+                    d @ AnyTri::Reader(..) => tree.refit(&d),
+                }
+            } else {
+                Tree { ids, nodes, prims }.refit(&Multi { firsts, geoms })
+            }
+        }
+        PrimKind::Aabbs => {
+            let prims: &mut [[f32; 6]] =
+                bytemuck::try_cast_slice_mut(prims_part.get_mut(..24 * n)?).ok()?;
+            let mut geoms = Vec::with_capacity(readers.len());
+            for (r, &first) in readers.iter().zip(&firsts) {
+                let Reader::Aabbs(reader) = r else {
+                    return None;
+                };
+                geoms.push(AabbSource { reader, first });
+            }
+            Tree { ids, nodes, prims }.refit(&Multi { firsts, geoms })
+        }
+        _ => None,
+    }
+}
+
+/// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
+struct Tree<'t, P> {
+    /// Primitive ids of the stored primitives `prims` holds (same length).
+    ids: &'t [u32],
+    nodes: &'t mut [Node],
+    prims: &'t mut [P],
+}
+
+/// Subtrees of more nodes than this may be refitted in parallel.
+const PARALLEL_NODES: usize = 256;
+
+/// Where a walk over a subtree is: the next node index the depth-first preorder must visit
+/// and the next stored primitive, both global.
+struct Cursor {
+    node: usize,
+    prim: usize,
+}
+
+impl<P: bytemuck::Pod + Send> Tree<'_, P> {
+    /// Refits the whole tree; returns the root bounds (the union of the root's child boxes).
+    fn refit<S: Source<Prim = P>>(self, src: &S) -> Option<Aabb> {
+        if self.nodes.is_empty() {
+            return self.prims.is_empty().then_some(Aabb::EMPTY);
+        }
+        let threads = rayon::current_num_threads();
+        // Split subtrees larger than this: some 4 tasks per thread.
+        let split = if threads > 1 {
+            (self.nodes.len() / (4 * threads)).max(PARALLEL_NODES)
+        } else {
+            usize::MAX
+        };
+        self.subtree(src, 0, 0, split)
+    }
+
+    /// Refits the subtree rooted at `nodes[0]`, which is global node `node_base`; its nodes
+    /// must be exactly `nodes` and its primitives exactly `prims` (from global `prim_base`).
+    /// Returns the union of the root's child boxes.
+    fn subtree<S: Source<Prim = P>>(
+        self,
+        src: &S,
+        node_base: usize,
+        prim_base: usize,
+        split: usize,
+    ) -> Option<Aabb> {
+        if self.nodes.len() > split {
+            return self.parallel(src, node_base, prim_base, split);
+        }
+        let Tree { ids, nodes, prims } = self;
+        let mut at = Cursor {
+            node: node_base + 1,
+            prim: prim_base,
+        };
+        let b = walk(
+            src, ids, nodes, prims, node_base, prim_base, node_base, &mut at, 1,
+        )?;
+        (at.node == node_base + nodes.len() && at.prim == prim_base + prims.len()).then_some(b)
+    }
+
+    /// Splits the root's used slots into tasks (an inner child's subtree, or a leaf), refits
+    /// them in parallel, then sets the root's boxes.
+    fn parallel<S: Source<Prim = P>>(
+        self,
+        src: &S,
+        node_base: usize,
+        prim_base: usize,
+        split: usize,
+    ) -> Option<Aabb> {
+        let Tree { ids, nodes, prims } = self;
+        let (root, mut rest) = nodes.split_first_mut()?;
+        let node_end = node_base + 1 + rest.len();
+        let prim_end = prim_base + prims.len();
+        // Per used slot, in slot order: the slot, its first node (inner children) and its
+        // first primitive.
+        let mut slots: Vec<(usize, Option<usize>, usize)> = Vec::with_capacity(WIDTH);
+        for k in 0..WIDTH {
+            let c = root.child[k];
+            if c == EMPTY_CHILD {
+                continue;
+            }
+            slots.push(if c & LEAF_BIT != 0 {
+                (k, None, (c & !LEAF_BIT) as usize)
+            } else {
+                let c = c as usize;
+                (k, Some(c), leftmost_prim(rest, node_base + 1, c)?)
+            });
+        }
+        // Each slot's nodes and primitives run up to the next slot's.
+        let mut tasks: Vec<(usize, Tree<P>, usize, usize)> = Vec::with_capacity(slots.len());
+        let mut ids_rest = ids;
+        let mut prims_rest = prims;
+        let mut node_at = node_base + 1;
+        let mut prim_at = prim_base;
+        for (i, &(k, node_start, prim_start)) in slots.iter().enumerate() {
+            let later = &slots[i + 1..];
+            let prim_stop = later.first().map_or(prim_end, |s| s.2);
+            if prim_start != prim_at
+                || prim_stop < prim_at
+                || prim_stop - prim_at > prims_rest.len()
+            {
+                return None;
+            }
+            let node_len = match node_start {
+                None => 0,
+                Some(c) => {
+                    let stop = later.iter().find_map(|s| s.1).unwrap_or(node_end);
+                    if c != node_at || stop <= node_at || stop - node_at > rest.len() {
+                        return None;
+                    }
+                    stop - node_at
+                }
+            };
+            let (mine, tail) = std::mem::take(&mut rest).split_at_mut(node_len);
+            rest = tail;
+            let (my_ids, ids_tail) = ids_rest.split_at(prim_stop - prim_at);
+            ids_rest = ids_tail;
+            let (my_prims, prims_tail) =
+                std::mem::take(&mut prims_rest).split_at_mut(prim_stop - prim_at);
+            prims_rest = prims_tail;
+            let t = Tree {
+                ids: my_ids,
+                nodes: mine,
+                prims: my_prims,
+            };
+            tasks.push((k, t, node_at, prim_at));
+            node_at += node_len;
+            prim_at = prim_stop;
+        }
+        if node_at != node_end || prim_at != prim_end {
+            return None;
+        }
+        let count = root.count;
+        let boxes: Vec<Option<(usize, Aabb)>> = tasks
+            .into_par_iter()
+            .map(|(k, t, nb, pb)| {
+                let b = if t.nodes.is_empty() {
+                    // A leaf: exactly its primitives.
+                    if t.prims.len() != count[k] as usize {
+                        return None;
+                    }
+                    src.leaf(t.ids, t.prims)?
+                } else {
+                    t.subtree(src, nb, pb, split)?
+                };
+                Some((k, b))
+            })
+            .collect();
+        let mut total = Aabb::EMPTY;
+        for r in boxes {
+            let (k, b) = r?;
+            root.set_bounds(k, &b);
+            total = total.union(&b);
+        }
+        Some(total)
+    }
+}
+
+/// The first stored primitive under node `c` (global; `nodes` starts at global `base`):
+/// the leftmost leaf's first primitive.
+fn leftmost_prim(nodes: &[Node], base: usize, mut c: usize) -> Option<usize> {
+    for _ in 0..=MAX_DEPTH {
+        let node = nodes.get(c.checked_sub(base)?)?;
+        let k = (0..WIDTH).find(|&k| node.child[k] != EMPTY_CHILD)?;
+        let child = node.child[k];
+        if child & LEAF_BIT != 0 {
+            return Some((child & !LEAF_BIT) as usize);
+        }
+        c = child as usize;
+    }
+    None
+}
+
+/// Refits global node `i` and its subtree, sequentially, depth-first: children must be the
+/// next nodes in preorder (`at.node`) and leaves the next primitives (`at.prim`). `nodes` and
+/// `prims` start at global `node_base` and `prim_base`. Returns the union of node `i`'s
+/// child boxes.
+#[allow(clippy::too_many_arguments)]
+fn walk<S: Source>(
+    src: &S,
+    ids: &[u32],
+    nodes: &mut [Node],
+    prims: &mut [S::Prim],
+    node_base: usize,
+    prim_base: usize,
+    i: usize,
+    at: &mut Cursor,
+    depth: u32,
+) -> Option<Aabb> {
+    if depth > MAX_DEPTH {
+        return None;
+    }
+    let li = i - node_base;
+    let (child, count) = {
+        let n = nodes.get(li)?;
+        (n.child, n.count)
+    };
+    let mut total = Aabb::EMPTY;
+    for k in 0..WIDTH {
+        let c = child[k];
+        if c == EMPTY_CHILD {
+            continue;
+        }
+        let b = if c & LEAF_BIT != 0 {
+            let first = (c & !LEAF_BIT) as usize;
+            let n = count[k] as usize;
+            if first != at.prim {
+                return None;
+            }
+            let lo = first.checked_sub(prim_base)?;
+            at.prim += n;
+            src.leaf(ids.get(lo..lo + n)?, prims.get_mut(lo..lo + n)?)?
+        } else {
+            let c = c as usize;
+            if c != at.node {
+                return None;
+            }
+            at.node += 1;
+            walk(
+                src,
+                ids,
+                nodes,
+                prims,
+                node_base,
+                prim_base,
+                c,
+                at,
+                depth + 1,
+            )?
+        };
+        nodes[li].set_bounds(k, &b);
+        total = total.union(&b);
+    }
+    Some(total)
+}
+
+// ---------------------------------------------------------------------------------------------
+// General path.
+
+/// The update for any layout and any primitive kind: decodes every stored primitive in
+/// parallel chunks (reporting the first error in stored order), then refits the nodes in one
+/// reverse pass (children always follow their parent).
+fn general(
+    bytes: &mut [u8],
+    h: &Header,
+    prim_kind: PrimKind,
+    readers: &[Reader],
+    instances: &[(InstanceRecord, Aabb)],
+    at: Location,
+) -> Result<()> {
+    let n = h.stored_count as usize;
+    let geoms: Vec<GeometryRecord> = geometry_records(bytes, h)?.to_vec();
+    let ids: Vec<u32> = prim_ids(bytes, h)?.to_vec();
+    let locate = |id: u32| {
+        let g = geoms
+            .partition_point(|r| r.first_primitive <= id)
+            .saturating_sub(1);
+        (g, id - geoms[g].first_primitive)
+    };
+    // New bounds per stored primitive.
+    let mut bounds = vec![Aabb::EMPTY; n];
+    let size = prim_kind.prim_size() as usize;
+    let prims = &mut bytes[h.prims_offset as usize..h.prims_offset as usize + size * n];
+    match prim_kind {
+        PrimKind::Triangles | PrimKind::Aabbs => {
+            // (VUID-03663 was checked by `refit` before the fast path.)
+            // One result per chunk (the first error in it), so the error reported is the first
+            // in primitive order whatever the thread count.
+            const CHUNK: usize = 2048;
+            let one = |out: &mut [u8], b: &mut Aabb, id: u32| -> Result<()> {
+                let (g, p) = locate(id);
+                let at = at.geometry(g).primitive(p);
+                let inactive = || {
+                    Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03664",
+                        at,
+                        "an active primitive became inactive in an update",
+                    )
+                };
+                match &readers[g] {
+                    Reader::Triangles(t) => {
+                        let f = match t.triangle_fast(p) {
+                            Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+                            _ => {
+                                let v = t.triangle(p)?.ok_or_else(inactive)?;
+                                [
+                                    v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0],
+                                    v[2][1], v[2][2],
+                                ]
+                            }
+                        };
+                        out.copy_from_slice(bytemuck::cast_slice(&f));
+                        *b = triangle_box(&f);
+                    }
+                    Reader::Aabbs(a) => {
+                        let bb = a.aabb(p)?.ok_or_else(inactive)?;
+                        out.copy_from_slice(bytemuck::cast_slice(&[
+                            bb.lo[0], bb.lo[1], bb.lo[2], bb.hi[0], bb.hi[1], bb.hi[2],
+                        ]));
+                        *b = bb;
+                    }
+                    Reader::Instances(_) => {}
+                }
+                Ok(())
+            };
+            let results: Vec<Result<()>> = prims
+                .par_chunks_mut(size * CHUNK)
+                .zip(bounds.par_chunks_mut(CHUNK))
+                .zip(ids.par_chunks(CHUNK))
+                .map(|((out, b), ids)| {
+                    for ((o, bb), &id) in out.chunks_exact_mut(size).zip(b.iter_mut()).zip(ids) {
+                        one(o, bb, id)?;
+                    }
+                    Ok(())
+                })
+                .collect();
+            for r in results {
+                r?;
+            }
+        }
+        PrimKind::Instances => {
+            // New instances by instance index; every stored one must still be active, and no
+            // other may have become active.
+            let mut by_id: Vec<Option<usize>> = vec![None; h.primitive_count as usize];
+            for (k, (r, _)) in instances.iter().enumerate() {
+                if let Some(s) = by_id.get_mut(r.instance_id as usize) {
+                    *s = Some(k);
+                }
+            }
+            let mut used = vec![false; instances.len()];
+            let recs: &mut [InstanceRecord] =
+                bytemuck::try_cast_slice_mut(prims).map_err(misaligned)?;
+            for (slot, rec) in recs.iter_mut().enumerate() {
+                let id = ids[slot];
+                let Some(k) = by_id.get(id as usize).copied().flatten() else {
+                    return Err(Error::vuid(
+                        "VUID-vkBuildAccelerationStructuresKHR-pInfos-03664",
+                        at.geometry(0).primitive(id),
+                        "an active instance became inactive in an update",
+                    ));
+                };
+                used[k] = true;
+                *rec = instances[k].0;
+                bounds[slot] = instances[k].1;
+            }
+            if let Some(k) = used.iter().position(|u| !u) {
+                return Err(Error::vuid(
+                    "VUID-vkBuildAccelerationStructuresKHR-pInfos-03663",
+                    at.geometry(0).primitive(instances[k].0.instance_id),
+                    "an inactive instance became active in an update",
+                ));
+            }
+        }
+        PrimKind::None => {}
+    }
+    // Refit: leaves from primitive bounds, inner children from their node's children.
+    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(
+        &mut bytes[h.nodes_offset as usize
+            ..h.nodes_offset as usize + NODE_SIZE as usize * h.node_count as usize],
+    )
+    .map_err(misaligned)?;
+    let mut root = Aabb::EMPTY;
+    for i in (0..nodes.len()).rev() {
+        for k in 0..WIDTH {
+            let c = nodes[i].child[k];
+            if c == EMPTY_CHILD {
+                continue;
+            }
+            let b = if c & LEAF_BIT != 0 {
+                let first = (c & !LEAF_BIT) as usize;
+                let count = nodes[i].count[k] as usize;
+                bounds[first..first + count]
+                    .iter()
+                    .fold(Aabb::EMPTY, |a, b| a.union(b))
+            } else {
+                let child = &nodes[c as usize];
+                (0..WIDTH)
+                    .filter(|&j| child.child[j] != EMPTY_CHILD)
+                    .fold(Aabb::EMPTY, |a, j| a.union(&child.bounds(j)))
+            };
+            nodes[i].set_bounds(k, &b);
+            if i == 0 {
+                root = root.union(&b);
+            }
+        }
+    }
+    let mut header = *h;
+    header.bounds = root;
+    bytes[..256].copy_from_slice(bytemuck::bytes_of(&header));
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    //! The fast path against the general path: same bytes and the same result (the same
+    //! error, for invalid updates) for every decoder, and whatever the thread count.
+
+    use super::*;
+    use crate::device::Device;
+    use crate::input::{AabbsData, BuildRangeInfo, Geometry, GeometryData, TrianglesData};
+    use crate::layout::view::View;
+    use ash::vk;
+
+    struct Rng(u64);
+    impl Rng {
+        fn f(&mut self) -> f32 {
+            self.0 ^= self.0 << 13;
+            self.0 ^= self.0 >> 7;
+            self.0 ^= self.0 << 17;
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn below(&mut self, n: usize) -> usize {
+            (self.f() * n as f32) as usize % n
+        }
+    }
+
+    /// A triangle geometry's buffers, vertices `stride` bytes apart.
+    struct Tris {
+        verts: Vec<u8>,
+        stride: usize,
+        index: Option<(vk::IndexType, Vec<u8>)>,
+        transform: Option<Vec<u8>>,
+        max_vertex: u32,
+        count: u32,
+    }
+
+    impl Tris {
+        fn new(r: &mut Rng, count: u32, stride: usize, index: vk::IndexType) -> Tris {
+            let n_verts = if index == vk::IndexType::NONE_KHR {
+                3 * count as usize
+            } else {
+                (count as usize + 2).min(60000)
+            };
+            let mut verts = vec![0u8; n_verts * stride];
+            for v in 0..n_verts {
+                let c = [r.f() * 50.0, r.f() * 50.0, r.f() * 50.0];
+                for k in 0..3 {
+                    let at = v * stride + 4 * k;
+                    verts[at..at + 4].copy_from_slice(&c[k].to_le_bytes());
+                }
+            }
+            let index = match index {
+                vk::IndexType::NONE_KHR => None,
+                t => {
+                    let size = if t == vk::IndexType::UINT16 { 2 } else { 4 };
+                    let mut b = Vec::new();
+                    for _ in 0..3 * count {
+                        let i = r.below(n_verts) as u32;
+                        b.extend_from_slice(&i.to_le_bytes()[..size]);
+                    }
+                    Some((t, b))
+                }
+            };
+            Tris {
+                verts,
+                stride,
+                index,
+                transform: None,
+                max_vertex: n_verts as u32 - 1,
+                count,
+            }
+        }
+        fn vertex_mut(&mut self, v: usize) -> &mut [u8] {
+            &mut self.verts[v * self.stride..v * self.stride + 12]
+        }
+        /// Moves every vertex a little.
+        fn jiggle(&mut self, r: &mut Rng) {
+            for v in 0..=self.max_vertex as usize {
+                for k in 0..3 {
+                    let b = &mut self.vertex_mut(v)[4 * k..4 * k + 4];
+                    let x = f32::from_le_bytes([b[0], b[1], b[2], b[3]]) + r.f() - 0.5;
+                    b.copy_from_slice(&x.to_le_bytes());
+                }
+            }
+        }
+        fn geometry(&self) -> Geometry<'_> {
+            Geometry::triangles(
+                TrianglesData {
+                    vertex_format: vk::Format::R32G32B32_SFLOAT,
+                    vertex_data: &self.verts,
+                    vertex_stride: self.stride as u64,
+                    max_vertex: self.max_vertex,
+                    index_type: self.index.as_ref().map_or(vk::IndexType::NONE_KHR, |i| i.0),
+                    index_data: self.index.as_ref().map(|i| &i.1[..]),
+                    transform_data: self.transform.as_deref(),
+                },
+                vk::GeometryFlagsKHR::OPAQUE,
+            )
+        }
+    }
+
+    fn boxes(r: &mut Rng, count: usize) -> Vec<u8> {
+        let mut out = Vec::new();
+        for _ in 0..count {
+            let lo = [r.f() * 50.0, r.f() * 50.0, r.f() * 50.0];
+            let b = [
+                lo[0],
+                lo[1],
+                lo[2],
+                lo[0] + r.f(),
+                lo[1] + r.f(),
+                lo[2] + r.f(),
+            ];
+            out.extend_from_slice(bytemuck::cast_slice(&b));
+        }
+        out
+    }
+
+    fn ranges(geoms: &[Geometry]) -> Vec<BuildRangeInfo> {
+        geoms
+            .iter()
+            .map(|g| BuildRangeInfo {
+                primitive_count: match &g.data {
+                    GeometryData::Aabbs(a) => (a.data.len() / a.stride as usize) as u32,
+                    _ => 0,
+                },
+                ..Default::default()
+            })
+            .collect()
+    }
+
+    fn tri_ranges(tris: &[&Tris]) -> Vec<BuildRangeInfo> {
+        tris.iter()
+            .map(|t| BuildRangeInfo {
+                primitive_count: t.count,
+                ..Default::default()
+            })
+            .collect()
+    }
+
+    /// The structure's bytes, in 64-byte aligned memory.
+    fn aligned(bytes: &[u8]) -> Vec<Node> {
+        let mut buf = vec![Node::EMPTY; bytes.len().div_ceil(256)];
+        bytemuck::cast_slice_mut::<Node, u8>(&mut buf)[..bytes.len()].copy_from_slice(bytes);
+        buf
+    }
+
+    /// Builds `before`, then updates it to `after` with `refit` on 1, 2 and 4 threads and with
+    /// the general path; all must agree (bytes and result). Returns the result.
+    fn check(
+        before: &[Geometry],
+        after: &[Geometry],
+        ranges: &[BuildRangeInfo],
+        prim_kind: PrimKind,
+    ) -> std::result::Result<(), String> {
+        let device = Device::new();
+        let blas = crate::quick::build(
+            &device,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+            before,
+            ranges,
+        )
+        .unwrap();
+        let src = device.with_bytes(blas, |b| Ok(b.to_vec())).unwrap();
+        let at = Location::info(0);
+        let readers: Vec<Reader> = after
+            .iter()
+            .zip(ranges)
+            .enumerate()
+            .map(|(g, (geom, range))| match &geom.data {
+                GeometryData::Triangles(t) => {
+                    Reader::Triangles(TriangleReader::new(t, range, at.geometry(g)).unwrap())
+                }
+                GeometryData::Aabbs(a) => {
+                    Reader::Aabbs(AabbReader::new(a, range, at.geometry(g)).unwrap())
+                }
+                GeometryData::Instances(_) => unreachable!(),
+            })
+            .collect();
+        let run = |f: &dyn Fn(&mut [u8], &Header) -> Result<()>| {
+            let mut buf = aligned(&src);
+            let bytes = &mut bytemuck::cast_slice_mut::<Node, u8>(&mut buf)[..src.len()];
+            let h = *View::parse(bytes).unwrap().header;
+            let r = f(bytes, &h).map_err(|e| e.to_string());
+            (bytes.to_vec(), r)
+        };
+        let (want_bytes, general_result) = run(&|b, h| general(b, h, prim_kind, &readers, &[], at));
+        // The general path leaves VUID-03663 to `refit`, which checks it first.
+        let want = run(&|b, h| check_still_inactive(b, h, &readers, at))
+            .1
+            .and(general_result.clone());
+        // The fast path itself takes every valid update here.
+        let fast = run(&|b, h| {
+            fused(b, h, prim_kind, &readers)
+                .map(|_| ())
+                .ok_or(Error::NotSupported(String::new()))
+        });
+        assert_eq!(fast.1.is_ok(), general_result.is_ok(), "fast path");
+        for threads in [1, 2, 4] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let (bytes, got) =
+                pool.install(|| run(&|b, h| refit(b, h, prim_kind, &readers, &[], at)));
+            assert_eq!(got, want, "{threads} threads");
+            if got.is_ok() {
+                assert!(bytes == want_bytes, "bytes differ on {threads} threads");
+            }
+        }
+        want
+    }
+
+    #[test]
+    fn every_triangle_decoder_matches_the_general_path() {
+        let mut r = Rng(7);
+        for (index, stride) in [
+            (vk::IndexType::UINT32, 12),
+            (vk::IndexType::UINT16, 12),
+            (vk::IndexType::NONE_KHR, 12),
+            (vk::IndexType::UINT32, 16),
+            (vk::IndexType::UINT16, 20),
+            (vk::IndexType::NONE_KHR, 24),
+        ] {
+            // Large enough for the parallel split (some thousand nodes).
+            let mut t = Tris::new(&mut r, 30000, stride, index);
+            let before = [t.geometry()];
+            let ranges = tri_ranges(&[&t]);
+            let before_owned: Vec<u8> = t.verts.clone();
+            let _ = before;
+            t.jiggle(&mut r);
+            let old = Tris {
+                verts: before_owned,
+                stride,
+                index: t.index.clone(),
+                transform: None,
+                max_vertex: t.max_vertex,
+                count: t.count,
+            };
+            // Index values change too (the CTS does that): swap two triangles' indices.
+            if let Some((_, idx)) = &mut t.index {
+                let s = idx.len() / t.count as usize;
+                let (a, b) = idx.split_at_mut(s * 10);
+                a[..s].swap_with_slice(&mut b[..s]);
+            }
+            check(
+                &[old.geometry()],
+                &[t.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap();
+        }
+    }
+
+    #[test]
+    fn several_geometries_inactive_triangles_and_transforms() {
+        let mut r = Rng(11);
+        let mut a = Tris::new(&mut r, 5000, 12, vk::IndexType::UINT32);
+        let mut b = Tris::new(&mut r, 3000, 16, vk::IndexType::UINT16);
+        let mut c = Tris::new(&mut r, 2000, 12, vk::IndexType::NONE_KHR);
+        let m: [f32; 12] = [0.5, 0.1, 0.0, 3.0, 0.0, 2.0, 0.3, -1.0, 0.2, 0.0, 1.0, 4.0];
+        c.transform = Some(bytemuck::cast_slice(&m).to_vec());
+        // Inactive triangles (NaN x) stay inactive.
+        let nan = f32::NAN.to_le_bytes();
+        a.vertex_mut(3)[..4].copy_from_slice(&nan);
+        c.vertex_mut(30)[..4].copy_from_slice(&nan);
+        let ranges = tri_ranges(&[&a, &b, &c]);
+        let old: Vec<Vec<u8>> = [&a, &b, &c].iter().map(|t| t.verts.clone()).collect();
+        let before: Vec<Tris> = [&a, &b, &c]
+            .iter()
+            .zip(old)
+            .map(|(t, verts)| Tris {
+                verts,
+                stride: t.stride,
+                index: t.index.clone(),
+                transform: t.transform.clone(),
+                max_vertex: t.max_vertex,
+                count: t.count,
+            })
+            .collect();
+        for t in [&mut a, &mut b, &mut c] {
+            t.jiggle(&mut r);
+        }
+        a.vertex_mut(3)[..4].copy_from_slice(&nan);
+        c.vertex_mut(30)[..4].copy_from_slice(&nan);
+        let geoms_before: Vec<Geometry> = before.iter().map(|t| t.geometry()).collect();
+        check(
+            &geoms_before,
+            &[a.geometry(), b.geometry(), c.geometry()],
+            &ranges,
+            PrimKind::Triangles,
+        )
+        .unwrap();
+        // A single transformed geometry.
+        check(
+            &geoms_before[2..],
+            &[c.geometry()],
+            &ranges[2..],
+            PrimKind::Triangles,
+        )
+        .unwrap();
+        // Errors: an inactive triangle made active (03663), active ones made inactive (03664)
+        // in two places, an index past maxVertex; each reported as the general path does.
+        let mut c2 = Tris {
+            verts: c.verts.clone(),
+            stride: c.stride,
+            index: None,
+            transform: c.transform.clone(),
+            max_vertex: c.max_vertex,
+            count: c.count,
+        };
+        c2.vertex_mut(30)[..4].copy_from_slice(&1.0f32.to_le_bytes());
+        let e = check(
+            &geoms_before,
+            &[a.geometry(), b.geometry(), c2.geometry()],
+            &ranges,
+            PrimKind::Triangles,
+        )
+        .unwrap_err();
+        assert!(e.contains("03663"), "{e}");
+        let mut a2 = Tris::new(&mut r, 1, 12, vk::IndexType::UINT32);
+        a2.verts = a.verts.clone();
+        a2.index = a.index.clone();
+        a2.max_vertex = a.max_vertex;
+        a2.count = a.count;
+        for v in [5usize, 4000] {
+            a2.vertex_mut(v)[..4].copy_from_slice(&nan);
+        }
+        let e = check(
+            &geoms_before,
+            &[a2.geometry(), b.geometry(), c.geometry()],
+            &ranges,
+            PrimKind::Triangles,
+        )
+        .unwrap_err();
+        assert!(e.contains("03664"), "{e}");
+        let mut b2 = Tris::new(&mut r, 1, 16, vk::IndexType::UINT16);
+        b2.verts = b.verts.clone();
+        b2.index = b.index.clone();
+        b2.max_vertex = b.max_vertex;
+        b2.count = b.count;
+        if let Some((_, idx)) = &mut b2.index {
+            idx[600..602].copy_from_slice(&u16::MAX.to_le_bytes());
+            idx[60..62].copy_from_slice(&u16::MAX.to_le_bytes());
+        }
+        let e = check(
+            &geoms_before,
+            &[a.geometry(), b2.geometry(), c.geometry()],
+            &ranges,
+            PrimKind::Triangles,
+        )
+        .unwrap_err();
+        assert!(e.contains("maxVertex"), "{e}");
+    }
+
+    #[test]
+    fn aabbs_match_the_general_path() {
+        let mut r = Rng(5);
+        let mut data = [boxes(&mut r, 6000), boxes(&mut r, 2500)];
+        data[0][..4].copy_from_slice(&f32::NAN.to_le_bytes());
+        let geoms = |d: &[Vec<u8>; 2]| -> Vec<Vec<u8>> { d.to_vec() };
+        let before = geoms(&data);
+        for d in &mut data {
+            for (i, b) in d.chunks_exact_mut(24).enumerate().skip(1) {
+                let dx = (i % 7) as f32 * 0.01;
+                for k in [0, 3] {
+                    let x =
+                        f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]])
+                            + dx;
+                    b[4 * k..4 * k + 4].copy_from_slice(&x.to_le_bytes());
+                }
+            }
+        }
+        fn g(d: &[Vec<u8>]) -> Vec<Geometry<'_>> {
+            d.iter()
+                .map(|d| {
+                    Geometry::aabbs(
+                        AabbsData {
+                            data: d,
+                            stride: 24,
+                        },
+                        vk::GeometryFlagsKHR::empty(),
+                    )
+                })
+                .collect()
+        }
+        let gb = g(&before);
+        let ga = g(&data);
+        check(&gb, &ga, &ranges(&gb), PrimKind::Aabbs).unwrap();
+        // An active box made inactive.
+        let mut bad = data.clone();
+        bad[1][24 * 2000..24 * 2000 + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+        let e = check(&gb, &g(&bad), &ranges(&gb), PrimKind::Aabbs).unwrap_err();
+        assert!(e.contains("03664"), "{e}");
+    }
+}
