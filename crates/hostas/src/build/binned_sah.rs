@@ -9,9 +9,31 @@ use crate::layout::WIDTH;
 use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
+const EXP: &str = match option_env!("HOSTAS_EXP") {
+    Some(s) => s,
+    None => "",
+};
+const fn has(s: &str, c: u8) -> bool {
+    let b = s.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == c {
+            return true;
+        }
+        i += 1;
+    }
+    false
+}
+const EXP_INS: bool = has(EXP, b'i');
+const EXP_1SET: bool = has(EXP, b'1');
+const EXP_COUNT: bool = has(EXP, b'c');
+#[allow(clippy::declare_interior_mutable_const)]
+const ZERO: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+static HIST: [std::sync::atomic::AtomicUsize; 80] = [ZERO; 80];
 pub const MAX_BINS: usize = 32;
 /// Ranges up to this size are split by an exact sweep instead of binning.
 const SMALL: usize = 16;
+const SWEEP_MAX: usize = if has(EXP, b's') { 8 } else { SMALL };
 
 /// A box as two 4-lane arrays, so that growing it compiles to one `minps` and one `maxps`.
 /// Lane 3 carries whatever the source had there (a primitive id) and is ignored.
@@ -53,10 +75,19 @@ impl B4 {
             self.hi[1] - self.lo[1],
             self.hi[2] - self.lo[2],
         ];
-        if d[0] < 0.0 || d[1] < 0.0 || d[2] < 0.0 {
-            return 0.0;
-        }
+        // No test for empty boxes: theirs is infinite, and times a count of zero it makes a
+        // NaN cost, which loses every comparison.
         d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+    /// The doubled centroid (lane 3 is meaningless).
+    #[inline(always)]
+    fn center2(&self) -> [f32; 4] {
+        [
+            self.lo[0] + self.hi[0],
+            self.lo[1] + self.hi[1],
+            self.lo[2] + self.hi[2],
+            0.0,
+        ]
     }
     fn aabb(&self) -> Aabb {
         Aabb {
@@ -143,41 +174,57 @@ struct Split {
     cost: f32,
 }
 
+/// Adding this to a float in `[-2^22, 2^22)` rounds it to an integer, left in the low mantissa
+/// bits: a conversion that vectorizes (a saturating `as` does not).
+const ROUND: f32 = 12_582_912.0;
+
+/// Maps doubled centroids to bins, on all axes at once. The mapping is monotone in the
+/// centroid on each axis, and binning and partitioning use the same arithmetic, so a partition
+/// always agrees with the bin counts. Centroids of the range the binner was made for land in
+/// `0..bins` without clamping (`scale` leaves a margin); anything else (NaN, infinities) lands
+/// in some bin, masked into range by the caller.
 #[derive(Clone, Copy)]
 struct Binner {
-    lo: [f32; 3],
-    scale: [f32; 3],
-    bins: usize,
+    lo: [f32; 4],
+    scale: [f32; 4],
 }
 
 impl Binner {
     fn new(centroids: &Aabb, bins: usize) -> Binner {
-        let mut scale = [0f32; 3];
+        let mut lo = [0f32; 4];
+        let mut scale = [0f32; 4];
         for k in 0..3 {
             let ext = centroids.hi[k] - centroids.lo[k];
+            lo[k] = centroids.lo[k];
             scale[k] = if ext > 0.0 {
                 bins as f32 * (1.0 - 1e-6) / ext
             } else {
                 0.0
             };
         }
-        Binner {
-            lo: centroids.lo,
-            scale,
-            bins,
-        }
+        Binner { lo, scale }
     }
+    /// The bin on each axis, before masking (lane 3 is meaningless).
     #[inline(always)]
-    fn bin(&self, c: f32, k: usize) -> usize {
-        // Clamped in float first, so the conversion is a plain truncation (NaN gives 0).
-        let f = fmin(
-            fmax((c - self.lo[k]) * self.scale[k], 0.0),
-            (self.bins - 1) as f32,
-        );
-        f as i32 as usize
+    fn bins(&self, r: &PrimRef) -> [u32; 4] {
+        let b = B4::of(r);
+        let mut f = [0f32; 4];
+        for k in 0..4 {
+            f[k] = (b.lo[k] + b.hi[k] - self.lo[k]) * self.scale[k] - 0.5 + ROUND;
+        }
+        f.map(f32::to_bits)
+    }
+    /// The bin of `r` on `axis`, masked to `mask`: the same arithmetic as [`Binner::bins`].
+    #[inline(always)]
+    fn bin(&self, r: &PrimRef, axis: usize, mask: u32) -> u32 {
+        let x = (r.lo[axis] + r.hi[axis] - self.lo[axis]) * self.scale[axis] - 0.5 + ROUND;
+        x.to_bits() & mask
     }
 }
 
+/// Per axis and bin: the bounds of the primitives whose centroid falls in it and their count.
+/// (Counts as `[bin][axis]` lanes ran 2-3 times slower here: the increments then share
+/// 16-byte words, which stalls the loads of the next primitive's bins.)
 struct Bins<const N: usize> {
     bounds: [[B4; N]; 3],
     counts: [[u32; N]; 3],
@@ -190,29 +237,53 @@ impl<const N: usize> Bins<N> {
             counts: [[0; N]; 3],
         }
     }
-    fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
-        for r in refs {
-            let rb = B4::of(r);
-            for k in 0..3 {
-                let i = binner.bin(rb.lo[k] + rb.hi[k], k).min(N - 1);
-                self.counts[k][i] += 1;
-                self.bounds[k][i].grow(&rb);
-            }
+    #[inline(always)]
+    fn add(&mut self, i: [u32; 4], rb: &B4) {
+        for k in 0..3 {
+            let j = i[k] as usize & (N - 1);
+            self.counts[k][j] += 1;
+            self.bounds[k][j].grow(rb);
         }
     }
-    fn merge(mut self, b: Bins<N>) -> Bins<N> {
-        for k in 0..3 {
-            for i in 0..N {
+    fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
+        // Neighbouring primitives often land in the same bins: alternating between two sets
+        // of bins halves the chains of dependent updates.
+        if !EXP_1SET && refs.len() >= 64 {
+            let mut other = Bins::<N>::new();
+            let pairs = refs.chunks_exact(2);
+            let rest = pairs.remainder();
+            for p in pairs {
+                self.add(binner.bins(&p[0]), &B4::of(&p[0]));
+                other.add(binner.bins(&p[1]), &B4::of(&p[1]));
+            }
+            for r in rest {
+                self.add(binner.bins(r), &B4::of(r));
+            }
+            self.merge_from(&other);
+            return;
+        }
+        for r in refs {
+            self.add(binner.bins(r), &B4::of(r));
+        }
+    }
+    fn merge_from(&mut self, b: &Bins<N>) {
+        for i in 0..N {
+            for k in 0..3 {
                 self.counts[k][i] += b.counts[k][i];
                 self.bounds[k][i].grow(&b.bounds[k][i]);
             }
         }
+    }
+    fn merge(mut self, b: Bins<N>) -> Bins<N> {
+        self.merge_from(&b);
         self
     }
 
-    /// The best split plane: (axis, first bin of the right side, cost).
-    fn best(&self, binner: &Binner, n_total: usize) -> Option<(usize, usize, f32)> {
+    /// The best split plane: (axis, first bin of the right side, cost). Planes with an empty
+    /// side cost NaN (an empty box's infinite area times a zero count) and never win.
+    fn best(&self, binner: &Binner) -> Option<(usize, usize, f32)> {
         let mut best: Option<(usize, usize, f32)> = None;
+        let mut best_cost = f32::INFINITY;
         for k in 0..3 {
             if binner.scale[k] == 0.0 {
                 continue;
@@ -230,24 +301,33 @@ impl<const N: usize> Bins<N> {
             for i in 1..N {
                 acc.grow(&self.bounds[k][i - 1]);
                 n += self.counts[k][i - 1];
-                if n == 0 || n as usize == n_total {
-                    continue;
-                }
                 let cost = acc.half_area() * n as f32 + right_cost[i];
-                if best.is_none_or(|b| cost < b.2) {
+                if cost < best_cost {
+                    best_cost = cost;
                     best = Some((k, i, cost));
                 }
             }
         }
         best
     }
+
+    /// Bounds of both sides of a plane.
+    fn sides(&self, axis: usize, bin: usize) -> (Aabb, Aabb) {
+        let (mut l, mut r) = (B4::EMPTY, B4::EMPTY);
+        for (i, b) in self.bounds[axis].iter().enumerate() {
+            if i < bin {
+                l.grow(b);
+            } else {
+                r.grow(b);
+            }
+        }
+        (l.aabb(), r.aabb())
+    }
 }
 
-fn best_bin_split_n<const N: usize>(
-    refs: &[PrimRef],
-    binner: &Binner,
-) -> Option<(usize, usize, f32)> {
-    let bins = if refs.len() > PARALLEL_THRESHOLD * 4 {
+/// Binning of a range (on all threads when large).
+fn bin_range<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Bins<N> {
+    if refs.len() > PARALLEL_THRESHOLD * 4 {
         refs.par_chunks(PARALLEL_THRESHOLD)
             .map(|c| {
                 let mut b = Bins::<N>::new();
@@ -259,27 +339,18 @@ fn best_bin_split_n<const N: usize>(
         let mut b = Bins::<N>::new();
         b.fill(binner, refs);
         b
-    };
-    bins.best(binner, refs.len())
-}
-
-/// The best binned split plane, with as many bins as `binner` says (8, 16 or 32).
-fn best_bin_split(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f32)> {
-    match binner.bins {
-        0..=8 => best_bin_split_n::<8>(refs, binner),
-        9..=16 => best_bin_split_n::<16>(refs, binner),
-        _ => best_bin_split_n::<32>(refs, binner),
     }
 }
 
 /// Partitions a large range on all threads: count each chunk's left side, then scatter every
 /// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
-/// sequential stable partition, whatever the thread count.
+/// sequential stable partition, whatever the thread count. Returns the size of the left side
+/// and the centroid bounds of both sides.
 fn parallel_partition(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     left_of: impl Fn(&PrimRef) -> bool + Sync,
-) -> (usize, RangeInfo, RangeInfo) {
+) -> (usize, B4, B4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
     let lefts: Vec<usize> = refs
         .par_chunks(CHUNK)
@@ -297,21 +368,21 @@ fn parallel_partition(
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<(Acc, Acc)> = refs
+    let infos: Vec<(B4, B4)> = refs
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
-            let (mut la, mut ra) = (Acc::EMPTY, Acc::EMPTY);
+            let (mut la, mut ra) = (B4::EMPTY, B4::EMPTY);
             let (mut li, mut ri) = (0, 0);
             for r in c {
                 if left_of(r) {
                     lp[li] = *r;
                     li += 1;
-                    la.add(r);
+                    la.grow_point(&B4::of(r).center2());
                 } else {
                     rp[ri] = *r;
                     ri += 1;
-                    ra.add(r);
+                    ra.grow_point(&B4::of(r).center2());
                 }
             }
             (la, ra)
@@ -320,12 +391,76 @@ fn parallel_partition(
     refs.par_chunks_mut(CHUNK)
         .zip(aux.par_chunks(CHUNK))
         .for_each(|(d, s)| d.copy_from_slice(s));
-    let (left, right) = infos
-        .iter()
-        .fold((RangeInfo::EMPTY, RangeInfo::EMPTY), |(l, r), (a, b)| {
-            (RangeInfo::merge(l, a.info()), RangeInfo::merge(r, b.info()))
-        });
-    (total_left, left, right)
+    let (mut l, mut r) = (B4::EMPTY, B4::EMPTY);
+    for (a, b) in &infos {
+        l.grow(a);
+        r.grow(b);
+    }
+    (total_left, l, r)
+}
+
+/// Partitions `refs` in place (Hoare: only misplaced pairs move) into those with
+/// `bin(axis) < bin` first; returns the size of the left side and the centroid bounds of both
+/// sides.
+fn partition(
+    refs: &mut [PrimRef],
+    binner: &Binner,
+    axis: usize,
+    bin: u32,
+    mask: u32,
+) -> (usize, B4, B4) {
+    let (mut cl, mut cr) = (B4::EMPTY, B4::EMPTY);
+    let (mut i, mut j) = (0, refs.len());
+    loop {
+        while i < j && binner.bin(&refs[i], axis, mask) < bin {
+            cl.grow_point(&B4::of(&refs[i]).center2());
+            i += 1;
+        }
+        while i < j && binner.bin(&refs[j - 1], axis, mask) >= bin {
+            cr.grow_point(&B4::of(&refs[j - 1]).center2());
+            j -= 1;
+        }
+        if i >= j {
+            break;
+        }
+        // refs[i] goes right and refs[j - 1] goes left.
+        cr.grow_point(&B4::of(&refs[i]).center2());
+        cl.grow_point(&B4::of(&refs[j - 1]).center2());
+        refs.swap(i, j - 1);
+        i += 1;
+        j -= 1;
+    }
+    (i, cl, cr)
+}
+
+fn binned_split_n<const N: usize>(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    binner: &Binner,
+) -> Option<Split> {
+    let bins = bin_range::<N>(refs, binner);
+    let (axis, bin, cost) = bins.best(binner)?;
+    let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
+        parallel_partition(refs, aux, |r| binner.bin(r, axis, N as u32 - 1) < bin as u32)
+    } else {
+        partition(refs, binner, axis, bin as u32, N as u32 - 1)
+    };
+    if mid == 0 || mid == refs.len() {
+        return None;
+    }
+    let (lb, rb) = bins.sides(axis, bin);
+    Some(Split {
+        mid,
+        left: RangeInfo {
+            bounds: lb,
+            centroids: cl.aabb(),
+        },
+        right: RangeInfo {
+            bounds: rb,
+            centroids: cr.aabb(),
+        },
+        cost,
+    })
 }
 
 /// Binned split, partitioning `refs` in place (through `aux` when large).
@@ -341,47 +476,112 @@ fn binned_split(
     } else {
         ctx.bins
     };
+    // Powers of two only: the bins array is indexed with a mask.
+    let bins = match bins {
+        0..=8 => 8,
+        9..=16 => 16,
+        _ => 32,
+    };
     let binner = Binner::new(&info.centroids, bins);
-    if binner.scale == [0.0; 3] {
+    if binner.scale == [0.0; 4] {
         return None;
     }
-    let (axis, bin, cost) = best_bin_split(refs, &binner)?;
-    if refs.len() > PARALLEL_THRESHOLD * 16 {
-        let (mid, left, right) = parallel_partition(refs, aux, |r| {
-            binner.bin(r.lo[axis] + r.hi[axis], axis) < bin
-        });
-        return (mid > 0 && mid < refs.len()).then_some(Split {
-            mid,
-            left,
-            right,
-            cost,
-        });
+    match bins {
+        8 => binned_split_n::<8>(refs, aux, &binner),
+        16 => binned_split_n::<16>(refs, aux, &binner),
+        _ => binned_split_n::<32>(refs, aux, &binner),
     }
-    let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
-    let (mut i, mut j) = (0, refs.len());
-    while i < j {
-        let r = refs[i];
-        if binner.bin(r.lo[axis] + r.hi[axis], axis) < bin {
-            left.add(&r);
-            i += 1;
-        } else {
-            j -= 1;
-            refs.swap(i, j);
-            right.add(&r);
+}
+
+/// A key that orders floats like `f32::total_cmp` when compared as signed integers, with
+/// the low 4 bits replaced by `i` so that keys of distinct positions always differ (ties, and
+/// centroids closer than 2^-19 relative, order by position).
+#[inline(always)]
+fn order_key(x: f32, i: usize) -> i32 {
+    let b = x.to_bits() as i32;
+    (b ^ (((b >> 31) as u32) >> 1) as i32) & !15 | i as i32
+}
+
+/// Exact SAH split of a small range: rank the centroids on each axis (branch-free: every pair
+/// compared; the keys are distinct, so the ranks are a permutation whatever the values) and
+/// sweep every position; the references are permuted once, for the winning axis.
+fn sweep_split(refs: &mut [PrimRef]) -> Split {
+    let n = refs.len();
+    debug_assert!((2..=SMALL).contains(&n));
+    let mut boxes = [B4::EMPTY; SMALL];
+    // Padding keys are larger than any real one, so they never count.
+    let mut keys = [[i32::MAX; SMALL]; 3];
+    for (i, r) in refs.iter().enumerate().take(SMALL) {
+        boxes[i] = B4::of(r);
+        let c = boxes[i].center2();
+        for k in 0..3 {
+            keys[k][i] = order_key(c[k], i);
         }
     }
-    (i > 0 && i < refs.len()).then_some(Split {
-        mid: i,
+    let mut best = (f32::INFINITY, n / 2);
+    let mut best_order = [0u8; SMALL];
+    for key in &keys {
+        let mut order = [0u8; SMALL];
+        for i in 0..n {
+            let ki = key[i];
+            let mut rank = 0u32;
+            for &kj in key {
+                rank += (kj < ki) as u32;
+            }
+            order[rank as usize & (SMALL - 1)] = i as u8;
+        }
+        let mut right_area = [0f32; SMALL];
+        let mut acc = B4::EMPTY;
+        for i in (1..n).rev() {
+            acc.grow(&boxes[order[i] as usize & (SMALL - 1)]);
+            right_area[i] = acc.half_area();
+        }
+        let mut acc = B4::EMPTY;
+        for i in 1..n {
+            acc.grow(&boxes[order[i - 1] as usize & (SMALL - 1)]);
+            let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
+            if cost < best.0 {
+                best = (cost, i);
+                best_order = order;
+            }
+        }
+    }
+    let (cost, mid) = best;
+    let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
+    if cost.is_finite() {
+        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| {
+            if i < n {
+                refs[i]
+            } else {
+                PrimRef::new(&Aabb::EMPTY, 0)
+            }
+        });
+        for (i, (dst, &src)) in refs.iter_mut().zip(&best_order[..n]).enumerate() {
+            *dst = copy[src as usize & (SMALL - 1)];
+            if i < mid {
+                left.add(dst);
+            } else {
+                right.add(dst);
+            }
+        }
+    } else {
+        for (i, r) in refs.iter().enumerate() {
+            if i < mid {
+                left.add(r);
+            } else {
+                right.add(r);
+            }
+        }
+    }
+    Split {
+        mid,
         left: left.info(),
         right: right.info(),
         cost,
-    })
+    }
 }
 
-/// Exact SAH split of a small range: order by centroid on each axis (a sort of small keys, not
-/// of the references) and sweep every position; the references are permuted once, for the
-/// winning axis.
-fn sweep_split(refs: &mut [PrimRef]) -> Split {
+fn sweep_split_ins(refs: &mut [PrimRef]) -> Split {
     let n = refs.len();
     debug_assert!(n <= SMALL);
     let boxes: [B4; SMALL] =
@@ -474,7 +674,15 @@ fn split(
     if depth >= MEDIAN_DEPTH {
         return median_split(refs, info);
     }
-    if refs.len() <= SMALL {
+    if EXP_COUNT {
+        let b = (usize::BITS - refs.len().leading_zeros()) as usize;
+        HIST[b].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        HIST[40 + b].fetch_add(refs.len(), std::sync::atomic::Ordering::Relaxed);
+    }
+    if refs.len() <= SWEEP_MAX {
+        if EXP_INS {
+            return sweep_split_ins(refs);
+        }
         return sweep_split(refs);
     }
     binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info))
@@ -496,9 +704,19 @@ pub fn build(
         traversal_cost,
     };
     let info = RangeInfo::of(refs);
-    Tree {
+    let t = Tree {
         root: Some(build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0)),
+    };
+    if EXP_COUNT {
+        for b in 0..40 {
+            let c = HIST[b].swap(0, std::sync::atomic::Ordering::Relaxed);
+            let p = HIST[40 + b].swap(0, std::sync::atomic::Ordering::Relaxed);
+            if c > 0 {
+                eprintln!("splits of <2^{b}: {c} ({:.2} per prim), prims {:.2} per prim", c as f64 / refs.len() as f64, p as f64 / refs.len() as f64);
+            }
+        }
     }
+    t
 }
 
 #[derive(Clone, Copy)]
@@ -618,4 +836,164 @@ fn build_child(
         )
     };
     (info.bounds, Child::Inner(Box::new(node)))
+}
+
+#[cfg(test)]
+mod exp_bench {
+    use super::*;
+    #[test]
+    #[ignore]
+    fn fill_speed() {
+        for &(n, coherent) in &[(1usize << 20, true), (1 << 20, false), (1 << 14, true), (1 << 14, false), (1 << 10, true)] {
+            let mut seed = 1u32;
+            let mut rnd = || {
+                seed ^= seed << 13;
+                seed ^= seed >> 17;
+                seed ^= seed << 5;
+                seed as f32 / u32::MAX as f32
+            };
+            let refs: Vec<PrimRef> = (0..n)
+                .map(|i| {
+                    let c = if coherent {
+                        let t = i as f32 / n as f32;
+                        [t, (t * 37.0).fract(), (t * 1371.0).fract()]
+                    } else {
+                        [rnd(), rnd(), rnd()]
+                    };
+                    PrimRef::new(
+                        &Aabb {
+                            lo: [c[0] - 0.001, c[1] - 0.001, c[2] - 0.001],
+                            hi: [c[0] + 0.001, c[1] + 0.001, c[2] + 0.001],
+                        },
+                        i as u32,
+                    )
+                })
+                .collect();
+            let info = RangeInfo::of(&refs);
+            let binner = Binner::new(&info.centroids, 32);
+            let reps = (1usize << 24) / n;
+            let t = std::time::Instant::now();
+            let mut x = 0;
+            for _ in 0..reps {
+                let mut b = Bins::<32>::new();
+                b.fill(&binner, &refs);
+                x += b.counts[0][3];
+            }
+            let el = t.elapsed().as_secs_f64();
+            // Variant: single set, add().
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let mut b = Bins::<32>::new();
+                for r in &refs {
+                    b.add(binner.bins(r), &B4::of(r));
+                }
+                x += b.counts[0][3];
+            }
+            println!("   single set add {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            // Variant: bounds first, then counts.
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let mut b = Bins::<32>::new();
+                for r in &refs {
+                    let i = binner.bins(r);
+                    let rb = B4::of(r);
+                    for k in 0..3 {
+                        b.bounds[k][i[k] as usize & 31].grow(&rb);
+                    }
+                    for k in 0..3 {
+                        b.counts[k][i[k] as usize & 31] += 1;
+                    }
+                }
+                x += b.counts[0][3];
+            }
+            println!("   bounds then counts {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            // Variant: separate count arrays per axis.
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let mut b = Bins::<32>::new();
+                let mut c = [[0u32; 32]; 3];
+                for r in &refs {
+                    let i = binner.bins(r);
+                    let rb = B4::of(r);
+                    for k in 0..3 {
+                        b.bounds[k][i[k] as usize & 31].grow(&rb);
+                        c[k][i[k] as usize & 31] += 1;
+                    }
+                }
+                x += b.counts[0][3] + c[1][3];
+            }
+            println!("   separate counts {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            // Variant: two passes.
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let mut b = Bins::<32>::new();
+                for r in &refs {
+                    let i = binner.bins(r);
+                    let rb = B4::of(r);
+                    for k in 0..3 {
+                        b.bounds[k][i[k] as usize & 31].grow(&rb);
+                    }
+                }
+                for r in &refs {
+                    let i = binner.bins(r);
+                    for k in 0..3 {
+                        b.counts[k][i[k] as usize & 31] += 1;
+                    }
+                }
+                x += b.counts[0][3];
+            }
+            println!("   two passes {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            // Variant: single set, counts only.
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let mut c = [[0u32; 4]; 32];
+                for r in &refs {
+                    let i = binner.bins(r);
+                    for k in 0..3 {
+                        c[i[k] as usize & 31][k] += 1;
+                    }
+                }
+                x += c[3][0];
+            }
+            let el_c = t.elapsed().as_secs_f64();
+            // Variant: single set, bounds only.
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let mut b = Bins::<32>::new();
+                for r in &refs {
+                    let i = binner.bins(r);
+                    let rb = B4::of(r);
+                    for k in 0..3 {
+                        b.bounds[k][i[k] as usize & 31].grow(&rb);
+                    }
+                }
+                x += b.counts[0][3];
+            }
+            let el_b = t.elapsed().as_secs_f64();
+            // Variant: bins only.
+            let t = std::time::Instant::now();
+            let mut acc = 0u32;
+            for _ in 0..reps {
+                for r in &refs {
+                    let i = binner.bins(r);
+                    acc = acc.wrapping_add(i[0] & 31).wrapping_add(i[1] & 31).wrapping_add(i[2] & 31);
+                }
+            }
+            x += acc;
+            let el_i = t.elapsed().as_secs_f64();
+            println!("   counts only {:.2}, bounds only {:.2}, bins only {:.2}", el_c / (reps * n) as f64 * 1e9, el_b / (reps * n) as f64 * 1e9, el_i / (reps * n) as f64 * 1e9);
+            let mut refs2 = refs.clone();
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                let (m, _, _) = partition(&mut refs2, &binner, 0, 16, 31);
+                x += m as u32;
+            }
+            let el2 = t.elapsed().as_secs_f64();
+            println!(
+                "n {n} coherent {coherent}: fill {:.2} ns/prim, partition {:.2} ns/prim ({x})",
+                el / (reps * n) as f64 * 1e9,
+                el2 / (reps * n) as f64 * 1e9
+            );
+        }
+    }
 }
