@@ -24,7 +24,6 @@ const fn has(s: &str, c: u8) -> bool {
     }
     false
 }
-const EXP_INS: bool = has(EXP, b'i');
 const EXP_1SET: bool = has(EXP, b'1');
 const EXP_COUNT: bool = has(EXP, b'c');
 #[allow(clippy::declare_interior_mutable_const)]
@@ -506,12 +505,31 @@ fn order_key(x: f32, i: usize) -> i32 {
 /// compared; the keys are distinct, so the ranks are a permutation whatever the values) and
 /// sweep every position; the references are permuted once, for the winning axis.
 fn sweep_split(refs: &mut [PrimRef]) -> Split {
-    let n = refs.len();
-    debug_assert!((2..=SMALL).contains(&n));
-    let mut boxes = [B4::EMPTY; SMALL];
+    match refs.len() {
+        0..=2 => {
+            // One way to split two (a lone primitive cannot be split; callers never ask).
+            let mid = refs.len() / 2;
+            let (l, r) = refs.split_at(mid);
+            let (l, r) = (RangeInfo::of(l), RangeInfo::of(r));
+            let cost = l.bounds.half_area() + r.bounds.half_area();
+            Split {
+                mid,
+                left: l,
+                right: r,
+                cost,
+            }
+        }
+        3..=8 => sweep_split_n::<8>(refs),
+        _ => sweep_split_n::<SMALL>(refs),
+    }
+}
+
+fn sweep_split_n<const L: usize>(refs: &mut [PrimRef]) -> Split {
+    let n = refs.len().min(L);
+    let mut boxes = [B4::EMPTY; L];
     // Padding keys are larger than any real one, so they never count.
-    let mut keys = [[i32::MAX; SMALL]; 3];
-    for (i, r) in refs.iter().enumerate().take(SMALL) {
+    let mut keys = [[i32::MAX; L]; 3];
+    for (i, r) in refs.iter().enumerate().take(L) {
         boxes[i] = B4::of(r);
         let c = boxes[i].center2();
         for k in 0..3 {
@@ -519,26 +537,26 @@ fn sweep_split(refs: &mut [PrimRef]) -> Split {
         }
     }
     let mut best = (f32::INFINITY, n / 2);
-    let mut best_order = [0u8; SMALL];
+    let mut best_order = [0u8; L];
     for key in &keys {
-        let mut order = [0u8; SMALL];
+        let mut order = [0u8; L];
         for i in 0..n {
             let ki = key[i];
             let mut rank = 0u32;
             for &kj in key {
                 rank += (kj < ki) as u32;
             }
-            order[rank as usize & (SMALL - 1)] = i as u8;
+            order[rank as usize & (L - 1)] = i as u8;
         }
-        let mut right_area = [0f32; SMALL];
+        let mut right_area = [0f32; L];
         let mut acc = B4::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&boxes[order[i] as usize & (SMALL - 1)]);
+            acc.grow(&boxes[order[i] as usize & (L - 1)]);
             right_area[i] = acc.half_area();
         }
         let mut acc = B4::EMPTY;
         for i in 1..n {
-            acc.grow(&boxes[order[i - 1] as usize & (SMALL - 1)]);
+            acc.grow(&boxes[order[i - 1] as usize & (L - 1)]);
             let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
             if cost < best.0 {
                 best = (cost, i);
@@ -549,7 +567,7 @@ fn sweep_split(refs: &mut [PrimRef]) -> Split {
     let (cost, mid) = best;
     let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
     if cost.is_finite() {
-        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| {
+        let copy: [PrimRef; L] = std::array::from_fn(|i| {
             if i < n {
                 refs[i]
             } else {
@@ -557,7 +575,7 @@ fn sweep_split(refs: &mut [PrimRef]) -> Split {
             }
         });
         for (i, (dst, &src)) in refs.iter_mut().zip(&best_order[..n]).enumerate() {
-            *dst = copy[src as usize & (SMALL - 1)];
+            *dst = copy[src as usize & (L - 1)];
             if i < mid {
                 left.add(dst);
             } else {
@@ -581,65 +599,6 @@ fn sweep_split(refs: &mut [PrimRef]) -> Split {
     }
 }
 
-fn sweep_split_ins(refs: &mut [PrimRef]) -> Split {
-    let n = refs.len();
-    debug_assert!(n <= SMALL);
-    let boxes: [B4; SMALL] =
-        std::array::from_fn(|i| if i < n { B4::of(&refs[i]) } else { B4::EMPTY });
-    let mut best = (f32::INFINITY, 0usize, n / 2);
-    let mut best_order = [0u8; SMALL];
-    let mut right_area = [0f32; SMALL];
-    for k in 0..3 {
-        // Insertion sort of (centroid, index): ties keep input order, so the result is
-        // deterministic.
-        let mut order = [0u8; SMALL];
-        let mut key = [0f32; SMALL];
-        for i in 0..n {
-            let c = boxes[i].lo[k] + boxes[i].hi[k];
-            let mut j = i;
-            while j > 0 && key[j - 1] > c {
-                key[j] = key[j - 1];
-                order[j] = order[j - 1];
-                j -= 1;
-            }
-            key[j] = c;
-            order[j] = i as u8;
-        }
-        let mut acc = B4::EMPTY;
-        for i in (1..n).rev() {
-            acc.grow(&boxes[order[i] as usize]);
-            right_area[i] = acc.half_area();
-        }
-        let mut acc = B4::EMPTY;
-        for i in 1..n {
-            acc.grow(&boxes[order[i - 1] as usize]);
-            let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
-            if cost < best.0 {
-                best = (cost, k, i);
-                best_order = order;
-            }
-        }
-    }
-    let (cost, _, mid) = best;
-    if cost.is_finite() {
-        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| {
-            if i < n {
-                refs[i]
-            } else {
-                PrimRef::new(&Aabb::EMPTY, 0)
-            }
-        });
-        for (dst, &src) in refs.iter_mut().zip(&best_order[..n]) {
-            *dst = copy[src as usize];
-        }
-    }
-    Split {
-        mid,
-        left: RangeInfo::of(&refs[..mid]),
-        right: RangeInfo::of(&refs[mid..]),
-        cost,
-    }
-}
 
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
 /// halves, so it bounds depth and handles coincident centroids.
@@ -680,9 +639,6 @@ fn split(
         HIST[40 + b].fetch_add(refs.len(), std::sync::atomic::Ordering::Relaxed);
     }
     if refs.len() <= SWEEP_MAX {
-        if EXP_INS {
-            return sweep_split_ins(refs);
-        }
         return sweep_split(refs);
     }
     binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info))
