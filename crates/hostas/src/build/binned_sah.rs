@@ -3,7 +3,7 @@
 //! final order is the order of `refs` on return. Small ranges are split with an exact SAH
 //! sweep over sorted centroids instead of bins.
 
-use super::tree::{Child, InnerNode, Tree};
+use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::WIDTH;
 use crate::math::{Aabb, fmax, fmin};
@@ -440,7 +440,9 @@ fn binned_split_n<const N: usize>(
     let bins = bin_range::<N>(refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
     let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
-        parallel_partition(refs, aux, |r| binner.bin(r, axis, N as u32 - 1) < bin as u32)
+        parallel_partition(refs, aux, |r| {
+            binner.bin(r, axis, N as u32 - 1) < bin as u32
+        })
     } else {
         partition(refs, binner, axis, bin as u32, N as u32 - 1)
     };
@@ -599,7 +601,6 @@ fn sweep_split_n<const L: usize>(refs: &mut [PrimRef]) -> Split {
     }
 }
 
-
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
 /// halves, so it bounds depth and handles coincident centroids.
 fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
@@ -652,7 +653,10 @@ pub fn build(
     traversal_cost: f32,
 ) -> Tree {
     if refs.is_empty() {
-        return Tree { root: None };
+        return Tree {
+            root: None,
+            nodes: Vec::new(),
+        };
     }
     let ctx = Ctx {
         bins: bins.clamp(2, MAX_BINS),
@@ -660,15 +664,22 @@ pub fn build(
         traversal_cost,
     };
     let info = RangeInfo::of(refs);
+    let mut out = NodeList::with_capacity(node_hint(refs.len()));
+    let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
     let t = Tree {
-        root: Some(build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0)),
+        root: Some(root),
+        nodes: out.nodes,
     };
     if EXP_COUNT {
         for b in 0..40 {
             let c = HIST[b].swap(0, std::sync::atomic::Ordering::Relaxed);
             let p = HIST[40 + b].swap(0, std::sync::atomic::Ordering::Relaxed);
             if c > 0 {
-                eprintln!("splits of <2^{b}: {c} ({:.2} per prim), prims {:.2} per prim", c as f64 / refs.len() as f64, p as f64 / refs.len() as f64);
+                eprintln!(
+                    "splits of <2^{b}: {c} ({:.2} per prim), prims {:.2} per prim",
+                    c as f64 / refs.len() as f64,
+                    p as f64 / refs.len() as f64
+                );
             }
         }
     }
@@ -689,6 +700,7 @@ fn build_child(
     info: RangeInfo,
     ctx: &Ctx,
     depth: u32,
+    out: &mut NodeList,
 ) -> (Aabb, Child) {
     let n = refs.len();
     let leaf = (
@@ -776,22 +788,30 @@ fn build_child(
         aux_rest = atail;
         at = p.end;
     }
-    let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> = slices
+    let me = out.reserve();
+    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
+    if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+        // Subtrees on their own lists, appended in slot order: the same nodes in the same
+        // order as the sequential path below.
+        let built: Vec<((Aabb, Child), NodeList)> = slices
             .into_par_iter()
             .flatten()
-            .map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1))
+            .map(|(s, a, b, i)| {
+                let mut sub = NodeList::with_capacity(node_hint(s.len()));
+                let c = build_child(s, a, b, i, ctx, depth + 1, &mut sub);
+                (c, sub)
+            })
             .collect();
-        InnerNode::new(children)
+        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
+            *slot = (b, out.append(c, sub));
+        }
     } else {
-        InnerNode::new(
-            slices
-                .into_iter()
-                .flatten()
-                .map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)),
-        )
-    };
-    (info.bounds, Child::Inner(Box::new(node)))
+        for (slot, (s, a, b, i)) in children.iter_mut().zip(slices.into_iter().flatten()) {
+            *slot = build_child(s, a, b, i, ctx, depth + 1, out);
+        }
+    }
+    out.set(me, InnerNode::new(children.into_iter().take(count)));
+    (info.bounds, Child::Inner(me))
 }
 
 #[cfg(test)]
@@ -800,7 +820,13 @@ mod exp_bench {
     #[test]
     #[ignore]
     fn fill_speed() {
-        for &(n, coherent) in &[(1usize << 20, true), (1 << 20, false), (1 << 14, true), (1 << 14, false), (1 << 10, true)] {
+        for &(n, coherent) in &[
+            (1usize << 20, true),
+            (1 << 20, false),
+            (1 << 14, true),
+            (1 << 14, false),
+            (1 << 10, true),
+        ] {
             let mut seed = 1u32;
             let mut rnd = || {
                 seed ^= seed << 13;
@@ -845,7 +871,10 @@ mod exp_bench {
                 }
                 x += b.counts[0][3];
             }
-            println!("   single set add {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            println!(
+                "   single set add {:.2}",
+                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
+            );
             // Variant: bounds first, then counts.
             let t = std::time::Instant::now();
             for _ in 0..reps {
@@ -862,7 +891,10 @@ mod exp_bench {
                 }
                 x += b.counts[0][3];
             }
-            println!("   bounds then counts {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            println!(
+                "   bounds then counts {:.2}",
+                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
+            );
             // Variant: separate count arrays per axis.
             let t = std::time::Instant::now();
             for _ in 0..reps {
@@ -878,7 +910,10 @@ mod exp_bench {
                 }
                 x += b.counts[0][3] + c[1][3];
             }
-            println!("   separate counts {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            println!(
+                "   separate counts {:.2}",
+                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
+            );
             // Variant: two passes.
             let t = std::time::Instant::now();
             for _ in 0..reps {
@@ -898,7 +933,10 @@ mod exp_bench {
                 }
                 x += b.counts[0][3];
             }
-            println!("   two passes {:.2}", t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9);
+            println!(
+                "   two passes {:.2}",
+                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
+            );
             // Variant: single set, counts only.
             let t = std::time::Instant::now();
             for _ in 0..reps {
@@ -932,12 +970,20 @@ mod exp_bench {
             for _ in 0..reps {
                 for r in &refs {
                     let i = binner.bins(r);
-                    acc = acc.wrapping_add(i[0] & 31).wrapping_add(i[1] & 31).wrapping_add(i[2] & 31);
+                    acc = acc
+                        .wrapping_add(i[0] & 31)
+                        .wrapping_add(i[1] & 31)
+                        .wrapping_add(i[2] & 31);
                 }
             }
             x += acc;
             let el_i = t.elapsed().as_secs_f64();
-            println!("   counts only {:.2}, bounds only {:.2}, bins only {:.2}", el_c / (reps * n) as f64 * 1e9, el_b / (reps * n) as f64 * 1e9, el_i / (reps * n) as f64 * 1e9);
+            println!(
+                "   counts only {:.2}, bounds only {:.2}, bins only {:.2}",
+                el_c / (reps * n) as f64 * 1e9,
+                el_b / (reps * n) as f64 * 1e9,
+                el_i / (reps * n) as f64 * 1e9
+            );
             let mut refs2 = refs.clone();
             let t = std::time::Instant::now();
             for _ in 0..reps {

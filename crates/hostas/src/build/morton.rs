@@ -3,7 +3,7 @@
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 
 use super::binned_sah::RangeInfo;
-use super::tree::{Child, InnerNode, Tree};
+use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::WIDTH;
 use crate::math::Aabb;
@@ -55,7 +55,10 @@ pub fn build(
 ) -> Tree {
     let n = refs.len();
     if n == 0 {
-        return Tree { root: None };
+        return Tree {
+            root: None,
+            nodes: Vec::new(),
+        };
     }
     let info = RangeInfo::of(refs);
     let c = info.centroids;
@@ -96,8 +99,12 @@ pub fn build(
         .with_min_len(PARALLEL_THRESHOLD)
         .for_each(|(r, a)| *r = *a);
     let codes = &tmp[..n];
-    let root = build_child(refs, codes, 0, max_leaf.max(4), 0);
-    Tree { root: Some(root) }
+    let mut out = NodeList::with_capacity(node_hint(n));
+    let root = build_child(refs, codes, 0, max_leaf.max(4), 0, &mut out);
+    Tree {
+        root: Some(root),
+        nodes: out.nodes,
+    }
 }
 
 /// Position of the first code in `codes` that differs from the first in the highest differing
@@ -120,6 +127,7 @@ fn build_child(
     base: u32,
     max_leaf: usize,
     depth: u32,
+    out: &mut NodeList,
 ) -> (Aabb, Child) {
     let n = refs.len();
     if n <= max_leaf.max(WIDTH - 1) {
@@ -156,25 +164,46 @@ fn build_child(
         parts[count] = (b + mid, e);
     }
     parts.sort_by_key(|&(b, e)| (e == b, b));
-    let build = |&(b, e): &(usize, usize)| {
-        build_child(
-            &refs[b..e],
-            &codes[b..e],
-            base + b as u32,
-            max_leaf,
-            depth + 1,
-        )
-    };
-    let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> =
-            parts.par_iter().filter(|p| p.1 > p.0).map(build).collect();
-        InnerNode::new(children)
+    let me = out.reserve();
+    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
+    let live = parts.iter().filter(|p| p.1 > p.0).count();
+    let parts = parts.iter().filter(|p| p.1 > p.0);
+    if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+        let built: Vec<((Aabb, Child), NodeList)> = parts
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|&(b, e)| {
+                let mut sub = NodeList::with_capacity(node_hint(e - b));
+                let c = build_child(
+                    &refs[b..e],
+                    &codes[b..e],
+                    base + b as u32,
+                    max_leaf,
+                    depth + 1,
+                    &mut sub,
+                );
+                (c, sub)
+            })
+            .collect();
+        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
+            *slot = (b, out.append(c, sub));
+        }
     } else {
-        InnerNode::new(parts.iter().filter(|p| p.1 > p.0).map(build))
-    };
+        for (slot, &(b, e)) in children.iter_mut().zip(parts) {
+            *slot = build_child(
+                &refs[b..e],
+                &codes[b..e],
+                base + b as u32,
+                max_leaf,
+                depth + 1,
+                out,
+            );
+        }
+    }
     let mut bounds = Aabb::EMPTY;
-    for (b, _) in node.children() {
+    for (b, _) in &children[..live] {
         bounds = bounds.union(b);
     }
-    (bounds, Child::Inner(Box::new(node)))
+    out.set(me, InnerNode::new(children.into_iter().take(live)));
+    (bounds, Child::Inner(me))
 }

@@ -894,7 +894,6 @@ fn write_prims(
     Ok(())
 }
 
-
 fn check_update_geometries(
     old: &[GeometryRecord],
     new: &[GeometryRecord],
