@@ -9,30 +9,9 @@ use crate::layout::WIDTH;
 use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
-const EXP: &str = match option_env!("HOSTAS_EXP") {
-    Some(s) => s,
-    None => "",
-};
-const fn has(s: &str, c: u8) -> bool {
-    let b = s.as_bytes();
-    let mut i = 0;
-    while i < b.len() {
-        if b[i] == c {
-            return true;
-        }
-        i += 1;
-    }
-    false
-}
-const EXP_1SET: bool = has(EXP, b'1');
-const EXP_COUNT: bool = has(EXP, b'c');
-#[allow(clippy::declare_interior_mutable_const)]
-const ZERO: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
-static HIST: [std::sync::atomic::AtomicUsize; 80] = [ZERO; 80];
 pub const MAX_BINS: usize = 32;
 /// Ranges up to this size are split by an exact sweep instead of binning.
 const SMALL: usize = 16;
-const SWEEP_MAX: usize = if has(EXP, b's') { 8 } else { SMALL };
 
 /// A box as two 4-lane arrays, so that growing it compiles to one `minps` and one `maxps`.
 /// Lane 3 carries whatever the source had there (a primitive id) and is ignored.
@@ -247,7 +226,7 @@ impl<const N: usize> Bins<N> {
     fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
         // Neighbouring primitives often land in the same bins: alternating between two sets
         // of bins halves the chains of dependent updates.
-        if !EXP_1SET && refs.len() >= 64 {
+        if refs.len() >= 64 {
             let mut other = Bins::<N>::new();
             let pairs = refs.chunks_exact(2);
             let rest = pairs.remainder();
@@ -634,12 +613,7 @@ fn split(
     if depth >= MEDIAN_DEPTH {
         return median_split(refs, info);
     }
-    if EXP_COUNT {
-        let b = (usize::BITS - refs.len().leading_zeros()) as usize;
-        HIST[b].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        HIST[40 + b].fetch_add(refs.len(), std::sync::atomic::Ordering::Relaxed);
-    }
-    if refs.len() <= SWEEP_MAX {
+    if refs.len() <= SMALL {
         return sweep_split(refs);
     }
     binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info))
@@ -666,24 +640,10 @@ pub fn build(
     let info = RangeInfo::of(refs);
     let mut out = NodeList::with_capacity(node_hint(refs.len()));
     let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
-    let t = Tree {
+    Tree {
         root: Some(root),
         nodes: out.nodes,
-    };
-    if EXP_COUNT {
-        for b in 0..40 {
-            let c = HIST[b].swap(0, std::sync::atomic::Ordering::Relaxed);
-            let p = HIST[40 + b].swap(0, std::sync::atomic::Ordering::Relaxed);
-            if c > 0 {
-                eprintln!(
-                    "splits of <2^{b}: {c} ({:.2} per prim), prims {:.2} per prim",
-                    c as f64 / refs.len() as f64,
-                    p as f64 / refs.len() as f64
-                );
-            }
-        }
     }
-    t
 }
 
 #[derive(Clone, Copy)]
@@ -812,190 +772,4 @@ fn build_child(
     }
     out.set(me, InnerNode::new(children.into_iter().take(count)));
     (info.bounds, Child::Inner(me))
-}
-
-#[cfg(test)]
-mod exp_bench {
-    use super::*;
-    #[test]
-    #[ignore]
-    fn fill_speed() {
-        for &(n, coherent) in &[
-            (1usize << 20, true),
-            (1 << 20, false),
-            (1 << 14, true),
-            (1 << 14, false),
-            (1 << 10, true),
-        ] {
-            let mut seed = 1u32;
-            let mut rnd = || {
-                seed ^= seed << 13;
-                seed ^= seed >> 17;
-                seed ^= seed << 5;
-                seed as f32 / u32::MAX as f32
-            };
-            let refs: Vec<PrimRef> = (0..n)
-                .map(|i| {
-                    let c = if coherent {
-                        let t = i as f32 / n as f32;
-                        [t, (t * 37.0).fract(), (t * 1371.0).fract()]
-                    } else {
-                        [rnd(), rnd(), rnd()]
-                    };
-                    PrimRef::new(
-                        &Aabb {
-                            lo: [c[0] - 0.001, c[1] - 0.001, c[2] - 0.001],
-                            hi: [c[0] + 0.001, c[1] + 0.001, c[2] + 0.001],
-                        },
-                        i as u32,
-                    )
-                })
-                .collect();
-            let info = RangeInfo::of(&refs);
-            let binner = Binner::new(&info.centroids, 32);
-            let reps = (1usize << 24) / n;
-            let t = std::time::Instant::now();
-            let mut x = 0;
-            for _ in 0..reps {
-                let mut b = Bins::<32>::new();
-                b.fill(&binner, &refs);
-                x += b.counts[0][3];
-            }
-            let el = t.elapsed().as_secs_f64();
-            // Variant: single set, add().
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let mut b = Bins::<32>::new();
-                for r in &refs {
-                    b.add(binner.bins(r), &B4::of(r));
-                }
-                x += b.counts[0][3];
-            }
-            println!(
-                "   single set add {:.2}",
-                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
-            );
-            // Variant: bounds first, then counts.
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let mut b = Bins::<32>::new();
-                for r in &refs {
-                    let i = binner.bins(r);
-                    let rb = B4::of(r);
-                    for k in 0..3 {
-                        b.bounds[k][i[k] as usize & 31].grow(&rb);
-                    }
-                    for k in 0..3 {
-                        b.counts[k][i[k] as usize & 31] += 1;
-                    }
-                }
-                x += b.counts[0][3];
-            }
-            println!(
-                "   bounds then counts {:.2}",
-                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
-            );
-            // Variant: separate count arrays per axis.
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let mut b = Bins::<32>::new();
-                let mut c = [[0u32; 32]; 3];
-                for r in &refs {
-                    let i = binner.bins(r);
-                    let rb = B4::of(r);
-                    for k in 0..3 {
-                        b.bounds[k][i[k] as usize & 31].grow(&rb);
-                        c[k][i[k] as usize & 31] += 1;
-                    }
-                }
-                x += b.counts[0][3] + c[1][3];
-            }
-            println!(
-                "   separate counts {:.2}",
-                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
-            );
-            // Variant: two passes.
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let mut b = Bins::<32>::new();
-                for r in &refs {
-                    let i = binner.bins(r);
-                    let rb = B4::of(r);
-                    for k in 0..3 {
-                        b.bounds[k][i[k] as usize & 31].grow(&rb);
-                    }
-                }
-                for r in &refs {
-                    let i = binner.bins(r);
-                    for k in 0..3 {
-                        b.counts[k][i[k] as usize & 31] += 1;
-                    }
-                }
-                x += b.counts[0][3];
-            }
-            println!(
-                "   two passes {:.2}",
-                t.elapsed().as_secs_f64() / (reps * n) as f64 * 1e9
-            );
-            // Variant: single set, counts only.
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let mut c = [[0u32; 4]; 32];
-                for r in &refs {
-                    let i = binner.bins(r);
-                    for k in 0..3 {
-                        c[i[k] as usize & 31][k] += 1;
-                    }
-                }
-                x += c[3][0];
-            }
-            let el_c = t.elapsed().as_secs_f64();
-            // Variant: single set, bounds only.
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let mut b = Bins::<32>::new();
-                for r in &refs {
-                    let i = binner.bins(r);
-                    let rb = B4::of(r);
-                    for k in 0..3 {
-                        b.bounds[k][i[k] as usize & 31].grow(&rb);
-                    }
-                }
-                x += b.counts[0][3];
-            }
-            let el_b = t.elapsed().as_secs_f64();
-            // Variant: bins only.
-            let t = std::time::Instant::now();
-            let mut acc = 0u32;
-            for _ in 0..reps {
-                for r in &refs {
-                    let i = binner.bins(r);
-                    acc = acc
-                        .wrapping_add(i[0] & 31)
-                        .wrapping_add(i[1] & 31)
-                        .wrapping_add(i[2] & 31);
-                }
-            }
-            x += acc;
-            let el_i = t.elapsed().as_secs_f64();
-            println!(
-                "   counts only {:.2}, bounds only {:.2}, bins only {:.2}",
-                el_c / (reps * n) as f64 * 1e9,
-                el_b / (reps * n) as f64 * 1e9,
-                el_i / (reps * n) as f64 * 1e9
-            );
-            let mut refs2 = refs.clone();
-            let t = std::time::Instant::now();
-            for _ in 0..reps {
-                let (m, _, _) = partition(&mut refs2, &binner, 0, 16, 31);
-                x += m as u32;
-            }
-            let el2 = t.elapsed().as_secs_f64();
-            println!(
-                "n {n} coherent {coherent}: fill {:.2} ns/prim, partition {:.2} ns/prim ({x})",
-                el / (reps * n) as f64 * 1e9,
-                el2 / (reps * n) as f64 * 1e9
-            );
-        }
-    }
 }

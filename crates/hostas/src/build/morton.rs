@@ -20,30 +20,43 @@ fn spread(v: u32) -> u32 {
     x
 }
 
-/// Sorts `keys` (LSD radix, 8 bits a pass over the 32 code bits in the high half).
+/// Bits per radix-sort digit: three passes over the 30 code bits.
+const DIGIT: u32 = 10;
+
+/// Sorts `keys` by their high half (the 30-bit code; the low half, a position, keeps equal
+/// codes in input order): LSD radix, three passes of 10 bits with all histograms counted in
+/// one first pass. The sorted keys end up in `tmp`.
 fn radix_sort(keys: &mut [u64], tmp: &mut [u64]) {
     let n = keys.len();
-    let (mut src, mut dst) = (keys, &mut tmp[..n]);
-    for pass in 0..4 {
-        let shift = 32 + 8 * pass;
-        let mut counts = [0usize; 256];
-        for k in src.iter() {
-            counts[((k >> shift) & 0xff) as usize] += 1;
-        }
+    const B: usize = 1 << DIGIT;
+    let mut counts = vec![[0u32; B]; 3];
+    for &k in keys.iter() {
+        let c = (k >> 32) as usize;
+        counts[0][c & (B - 1)] += 1;
+        counts[1][(c >> DIGIT) & (B - 1)] += 1;
+        counts[2][(c >> (2 * DIGIT)) & (B - 1)] += 1;
+    }
+    for h in counts.iter_mut() {
         let mut sum = 0;
-        for c in counts.iter_mut() {
+        for c in h.iter_mut() {
             let v = *c;
             *c = sum;
             sum += v;
         }
+    }
+    let (mut src, mut dst) = (keys, &mut tmp[..n]);
+    for (pass, h) in counts.iter_mut().enumerate() {
+        let shift = 32 + DIGIT * pass as u32;
         for &k in src.iter() {
-            let b = ((k >> shift) & 0xff) as usize;
-            dst[counts[b]] = k;
-            counts[b] += 1;
+            let b = (k >> shift) as usize & (B - 1);
+            if let Some(d) = dst.get_mut(h[b] as usize) {
+                *d = k;
+            }
+            h[b] += 1;
         }
         std::mem::swap(&mut src, &mut dst);
     }
-    // Four passes: the sorted data is back in `keys`.
+    // Three passes: the sorted keys are in `tmp`.
 }
 
 pub fn build(
@@ -80,25 +93,27 @@ pub fn build(
             *k = (code(r) as u64) << 32 | i as u64;
         });
     radix_sort(&mut keys[..n], tmp);
-    // The sorted codes, for splitting.
-    tmp[..n]
+    let sorted = &tmp[..n];
+    // The sorted codes (in the space of `keys`, now free), for splitting.
+    let codes: &mut [u32] = &mut bytemuck::cast_slice_mut(&mut keys[..n])[..n];
+    codes
         .par_iter_mut()
-        .zip(keys[..n].par_iter())
+        .zip(sorted.par_iter())
         .with_min_len(PARALLEL_THRESHOLD)
-        .for_each(|(t, k)| {
-            *t = k >> 32;
+        .for_each(|(c, k)| {
+            *c = (k >> 32) as u32;
         });
     // Put the references in sorted order, so leaves read their bounds sequentially.
     aux[..n]
         .par_iter_mut()
-        .zip(keys[..n].par_iter())
+        .zip(sorted.par_iter())
         .with_min_len(PARALLEL_THRESHOLD)
         .for_each(|(a, k)| *a = refs[(*k & 0xffff_ffff) as usize]);
     refs.par_iter_mut()
         .zip(aux[..n].par_iter())
         .with_min_len(PARALLEL_THRESHOLD)
         .for_each(|(r, a)| *r = *a);
-    let codes = &tmp[..n];
+    let codes = &*codes;
     let mut out = NodeList::with_capacity(node_hint(n));
     let root = build_child(refs, codes, 0, max_leaf.max(4), 0, &mut out);
     Tree {
@@ -109,13 +124,13 @@ pub fn build(
 
 /// Position of the first code in `codes` that differs from the first in the highest differing
 /// bit, or the middle when all codes are equal.
-fn split_point(codes: &[u64]) -> usize {
+fn split_point(codes: &[u32]) -> usize {
     let (first, last) = (codes[0], codes[codes.len() - 1]);
     if first == last {
         return codes.len() / 2;
     }
-    let bit = 63 - (first ^ last).leading_zeros();
-    let mask = !((1u64 << bit) - 1) & 0xffff_ffff;
+    let bit = 31 - (first ^ last).leading_zeros();
+    let mask = !((1u32 << bit) - 1);
     let prefix = first & mask;
     // codes are sorted: the first one with the bit set starts the right half.
     codes.partition_point(|&c| (c & mask) == prefix)
@@ -123,7 +138,7 @@ fn split_point(codes: &[u64]) -> usize {
 
 fn build_child(
     refs: &[PrimRef],
-    codes: &[u64],
+    codes: &[u32],
     base: u32,
     max_leaf: usize,
     depth: u32,
