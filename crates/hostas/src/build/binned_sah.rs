@@ -3,7 +3,7 @@
 //! final order is the order of `refs` on return. Small ranges are split with an exact SAH
 //! sweep over sorted centroids instead of bins.
 
-use super::tree::{Child, InnerNode, Tree};
+use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::WIDTH;
 use crate::math::{Aabb, fmax, fmin};
@@ -53,10 +53,19 @@ impl B4 {
             self.hi[1] - self.lo[1],
             self.hi[2] - self.lo[2],
         ];
-        if d[0] < 0.0 || d[1] < 0.0 || d[2] < 0.0 {
-            return 0.0;
-        }
+        // No test for empty boxes: theirs is infinite, and times a count of zero it makes a
+        // NaN cost, which loses every comparison.
         d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
+    }
+    /// The doubled centroid (lane 3 is meaningless).
+    #[inline(always)]
+    fn center2(&self) -> [f32; 4] {
+        [
+            self.lo[0] + self.hi[0],
+            self.lo[1] + self.hi[1],
+            self.lo[2] + self.hi[2],
+            0.0,
+        ]
     }
     fn aabb(&self) -> Aabb {
         Aabb {
@@ -143,41 +152,57 @@ struct Split {
     cost: f32,
 }
 
+/// Adding this to a float in `[-2^22, 2^22)` rounds it to an integer, left in the low mantissa
+/// bits: a conversion that vectorizes (a saturating `as` does not).
+const ROUND: f32 = 12_582_912.0;
+
+/// Maps doubled centroids to bins, on all axes at once. The mapping is monotone in the
+/// centroid on each axis, and binning and partitioning use the same arithmetic, so a partition
+/// always agrees with the bin counts. Centroids of the range the binner was made for land in
+/// `0..bins` without clamping (`scale` leaves a margin); anything else (NaN, infinities) lands
+/// in some bin, masked into range by the caller.
 #[derive(Clone, Copy)]
 struct Binner {
-    lo: [f32; 3],
-    scale: [f32; 3],
-    bins: usize,
+    lo: [f32; 4],
+    scale: [f32; 4],
 }
 
 impl Binner {
     fn new(centroids: &Aabb, bins: usize) -> Binner {
-        let mut scale = [0f32; 3];
+        let mut lo = [0f32; 4];
+        let mut scale = [0f32; 4];
         for k in 0..3 {
             let ext = centroids.hi[k] - centroids.lo[k];
+            lo[k] = centroids.lo[k];
             scale[k] = if ext > 0.0 {
                 bins as f32 * (1.0 - 1e-6) / ext
             } else {
                 0.0
             };
         }
-        Binner {
-            lo: centroids.lo,
-            scale,
-            bins,
-        }
+        Binner { lo, scale }
     }
+    /// The bin on each axis, before masking (lane 3 is meaningless).
     #[inline(always)]
-    fn bin(&self, c: f32, k: usize) -> usize {
-        // Clamped in float first, so the conversion is a plain truncation (NaN gives 0).
-        let f = fmin(
-            fmax((c - self.lo[k]) * self.scale[k], 0.0),
-            (self.bins - 1) as f32,
-        );
-        f as i32 as usize
+    fn bins(&self, r: &PrimRef) -> [u32; 4] {
+        let b = B4::of(r);
+        let mut f = [0f32; 4];
+        for k in 0..4 {
+            f[k] = (b.lo[k] + b.hi[k] - self.lo[k]) * self.scale[k] - 0.5 + ROUND;
+        }
+        f.map(f32::to_bits)
+    }
+    /// The bin of `r` on `axis`, masked to `mask`: the same arithmetic as [`Binner::bins`].
+    #[inline(always)]
+    fn bin(&self, r: &PrimRef, axis: usize, mask: u32) -> u32 {
+        let x = (r.lo[axis] + r.hi[axis] - self.lo[axis]) * self.scale[axis] - 0.5 + ROUND;
+        x.to_bits() & mask
     }
 }
 
+/// Per axis and bin: the bounds of the primitives whose centroid falls in it and their count.
+/// (Counts as `[bin][axis]` lanes ran 2-3 times slower here: the increments then share
+/// 16-byte words, which stalls the loads of the next primitive's bins.)
 struct Bins<const N: usize> {
     bounds: [[B4; N]; 3],
     counts: [[u32; N]; 3],
@@ -190,29 +215,53 @@ impl<const N: usize> Bins<N> {
             counts: [[0; N]; 3],
         }
     }
-    fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
-        for r in refs {
-            let rb = B4::of(r);
-            for k in 0..3 {
-                let i = binner.bin(rb.lo[k] + rb.hi[k], k).min(N - 1);
-                self.counts[k][i] += 1;
-                self.bounds[k][i].grow(&rb);
-            }
+    #[inline(always)]
+    fn add(&mut self, i: [u32; 4], rb: &B4) {
+        for k in 0..3 {
+            let j = i[k] as usize & (N - 1);
+            self.counts[k][j] += 1;
+            self.bounds[k][j].grow(rb);
         }
     }
-    fn merge(mut self, b: Bins<N>) -> Bins<N> {
-        for k in 0..3 {
-            for i in 0..N {
+    fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
+        // Neighbouring primitives often land in the same bins: alternating between two sets
+        // of bins halves the chains of dependent updates.
+        if refs.len() >= 64 {
+            let mut other = Bins::<N>::new();
+            let pairs = refs.chunks_exact(2);
+            let rest = pairs.remainder();
+            for p in pairs {
+                self.add(binner.bins(&p[0]), &B4::of(&p[0]));
+                other.add(binner.bins(&p[1]), &B4::of(&p[1]));
+            }
+            for r in rest {
+                self.add(binner.bins(r), &B4::of(r));
+            }
+            self.merge_from(&other);
+            return;
+        }
+        for r in refs {
+            self.add(binner.bins(r), &B4::of(r));
+        }
+    }
+    fn merge_from(&mut self, b: &Bins<N>) {
+        for i in 0..N {
+            for k in 0..3 {
                 self.counts[k][i] += b.counts[k][i];
                 self.bounds[k][i].grow(&b.bounds[k][i]);
             }
         }
+    }
+    fn merge(mut self, b: Bins<N>) -> Bins<N> {
+        self.merge_from(&b);
         self
     }
 
-    /// The best split plane: (axis, first bin of the right side, cost).
-    fn best(&self, binner: &Binner, n_total: usize) -> Option<(usize, usize, f32)> {
+    /// The best split plane: (axis, first bin of the right side, cost). Planes with an empty
+    /// side cost NaN (an empty box's infinite area times a zero count) and never win.
+    fn best(&self, binner: &Binner) -> Option<(usize, usize, f32)> {
         let mut best: Option<(usize, usize, f32)> = None;
+        let mut best_cost = f32::INFINITY;
         for k in 0..3 {
             if binner.scale[k] == 0.0 {
                 continue;
@@ -230,24 +279,33 @@ impl<const N: usize> Bins<N> {
             for i in 1..N {
                 acc.grow(&self.bounds[k][i - 1]);
                 n += self.counts[k][i - 1];
-                if n == 0 || n as usize == n_total {
-                    continue;
-                }
                 let cost = acc.half_area() * n as f32 + right_cost[i];
-                if best.is_none_or(|b| cost < b.2) {
+                if cost < best_cost {
+                    best_cost = cost;
                     best = Some((k, i, cost));
                 }
             }
         }
         best
     }
+
+    /// Bounds of both sides of a plane.
+    fn sides(&self, axis: usize, bin: usize) -> (Aabb, Aabb) {
+        let (mut l, mut r) = (B4::EMPTY, B4::EMPTY);
+        for (i, b) in self.bounds[axis].iter().enumerate() {
+            if i < bin {
+                l.grow(b);
+            } else {
+                r.grow(b);
+            }
+        }
+        (l.aabb(), r.aabb())
+    }
 }
 
-fn best_bin_split_n<const N: usize>(
-    refs: &[PrimRef],
-    binner: &Binner,
-) -> Option<(usize, usize, f32)> {
-    let bins = if refs.len() > PARALLEL_THRESHOLD * 4 {
+/// Binning of a range (on all threads when large).
+fn bin_range<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Bins<N> {
+    if refs.len() > PARALLEL_THRESHOLD * 4 {
         refs.par_chunks(PARALLEL_THRESHOLD)
             .map(|c| {
                 let mut b = Bins::<N>::new();
@@ -259,27 +317,18 @@ fn best_bin_split_n<const N: usize>(
         let mut b = Bins::<N>::new();
         b.fill(binner, refs);
         b
-    };
-    bins.best(binner, refs.len())
-}
-
-/// The best binned split plane, with as many bins as `binner` says (8, 16 or 32).
-fn best_bin_split(refs: &[PrimRef], binner: &Binner) -> Option<(usize, usize, f32)> {
-    match binner.bins {
-        0..=8 => best_bin_split_n::<8>(refs, binner),
-        9..=16 => best_bin_split_n::<16>(refs, binner),
-        _ => best_bin_split_n::<32>(refs, binner),
     }
 }
 
 /// Partitions a large range on all threads: count each chunk's left side, then scatter every
 /// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
-/// sequential stable partition, whatever the thread count.
+/// sequential stable partition, whatever the thread count. Returns the size of the left side
+/// and the centroid bounds of both sides.
 fn parallel_partition(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     left_of: impl Fn(&PrimRef) -> bool + Sync,
-) -> (usize, RangeInfo, RangeInfo) {
+) -> (usize, B4, B4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
     let lefts: Vec<usize> = refs
         .par_chunks(CHUNK)
@@ -297,21 +346,21 @@ fn parallel_partition(
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<(Acc, Acc)> = refs
+    let infos: Vec<(B4, B4)> = refs
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
-            let (mut la, mut ra) = (Acc::EMPTY, Acc::EMPTY);
+            let (mut la, mut ra) = (B4::EMPTY, B4::EMPTY);
             let (mut li, mut ri) = (0, 0);
             for r in c {
                 if left_of(r) {
                     lp[li] = *r;
                     li += 1;
-                    la.add(r);
+                    la.grow_point(&B4::of(r).center2());
                 } else {
                     rp[ri] = *r;
                     ri += 1;
-                    ra.add(r);
+                    ra.grow_point(&B4::of(r).center2());
                 }
             }
             (la, ra)
@@ -320,12 +369,72 @@ fn parallel_partition(
     refs.par_chunks_mut(CHUNK)
         .zip(aux.par_chunks(CHUNK))
         .for_each(|(d, s)| d.copy_from_slice(s));
-    let (left, right) = infos
-        .iter()
-        .fold((RangeInfo::EMPTY, RangeInfo::EMPTY), |(l, r), (a, b)| {
-            (RangeInfo::merge(l, a.info()), RangeInfo::merge(r, b.info()))
-        });
-    (total_left, left, right)
+    let (mut l, mut r) = (B4::EMPTY, B4::EMPTY);
+    for (a, b) in &infos {
+        l.grow(a);
+        r.grow(b);
+    }
+    (total_left, l, r)
+}
+
+/// Partitions `refs` in place into those with `bin(axis) < bin` first; returns the size of the
+/// left side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
+/// swap, bounds accumulated in an array indexed by the side): which side a primitive goes to is often a coin toss, and
+/// mispredicted branches cost more than the extra stores.
+fn partition(
+    refs: &mut [PrimRef],
+    binner: &Binner,
+    axis: usize,
+    bin: u32,
+    mask: u32,
+) -> (usize, B4, B4) {
+    // Centroid bounds of the right side, then the left: indexed by the side, not branched on
+    // (kept in memory: as two registers, the compiler would branch again).
+    let mut storage = [B4::EMPTY; 2];
+    let acc = std::hint::black_box(&mut storage);
+    let mut i = 0;
+    for j in 0..refs.len() {
+        let r = refs[j];
+        let left = binner.bin(&r, axis, mask) < bin;
+        acc[left as usize].grow_point(&B4::of(&r).center2());
+        // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
+        refs[j] = refs[i];
+        refs[i] = r;
+        i += left as usize;
+    }
+    (i, storage[1], storage[0])
+}
+
+fn binned_split_n<const N: usize>(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    binner: &Binner,
+) -> Option<Split> {
+    let bins = bin_range::<N>(refs, binner);
+    let (axis, bin, cost) = bins.best(binner)?;
+    let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
+        parallel_partition(refs, aux, |r| {
+            binner.bin(r, axis, N as u32 - 1) < bin as u32
+        })
+    } else {
+        partition(refs, binner, axis, bin as u32, N as u32 - 1)
+    };
+    if mid == 0 || mid == refs.len() {
+        return None;
+    }
+    let (lb, rb) = bins.sides(axis, bin);
+    Some(Split {
+        mid,
+        left: RangeInfo {
+            bounds: lb,
+            centroids: cl.aabb(),
+        },
+        right: RangeInfo {
+            bounds: rb,
+            centroids: cr.aabb(),
+        },
+        cost,
+    })
 }
 
 /// Binned split, partitioning `refs` in place (through `aux` when large).
@@ -341,102 +450,126 @@ fn binned_split(
     } else {
         ctx.bins
     };
+    // Powers of two only: the bins array is indexed with a mask.
+    let bins = match bins {
+        0..=8 => 8,
+        9..=16 => 16,
+        _ => 32,
+    };
     let binner = Binner::new(&info.centroids, bins);
-    if binner.scale == [0.0; 3] {
+    if binner.scale == [0.0; 4] {
         return None;
     }
-    let (axis, bin, cost) = best_bin_split(refs, &binner)?;
-    if refs.len() > PARALLEL_THRESHOLD * 16 {
-        let (mid, left, right) = parallel_partition(refs, aux, |r| {
-            binner.bin(r.lo[axis] + r.hi[axis], axis) < bin
-        });
-        return (mid > 0 && mid < refs.len()).then_some(Split {
-            mid,
-            left,
-            right,
-            cost,
-        });
+    match bins {
+        8 => binned_split_n::<8>(refs, aux, &binner),
+        16 => binned_split_n::<16>(refs, aux, &binner),
+        _ => binned_split_n::<32>(refs, aux, &binner),
     }
-    let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
-    let (mut i, mut j) = (0, refs.len());
-    while i < j {
-        let r = refs[i];
-        if binner.bin(r.lo[axis] + r.hi[axis], axis) < bin {
-            left.add(&r);
-            i += 1;
-        } else {
-            j -= 1;
-            refs.swap(i, j);
-            right.add(&r);
-        }
-    }
-    (i > 0 && i < refs.len()).then_some(Split {
-        mid: i,
-        left: left.info(),
-        right: right.info(),
-        cost,
-    })
 }
 
-/// Exact SAH split of a small range: order by centroid on each axis (a sort of small keys, not
-/// of the references) and sweep every position; the references are permuted once, for the
-/// winning axis.
+/// A key that orders floats like `f32::total_cmp` when compared as signed integers, with
+/// the low 4 bits replaced by `i` so that keys of distinct positions always differ (ties, and
+/// centroids closer than 2^-19 relative, order by position).
+#[inline(always)]
+fn order_key(x: f32, i: usize) -> i32 {
+    let b = x.to_bits() as i32;
+    (b ^ (((b >> 31) as u32) >> 1) as i32) & !15 | i as i32
+}
+
+/// Exact SAH split of a small range: rank the centroids on each axis (branch-free: every pair
+/// compared; the keys are distinct, so the ranks are a permutation whatever the values) and
+/// sweep every position; the references are permuted once, for the winning axis.
 fn sweep_split(refs: &mut [PrimRef]) -> Split {
-    let n = refs.len();
-    debug_assert!(n <= SMALL);
-    let boxes: [B4; SMALL] =
-        std::array::from_fn(|i| if i < n { B4::of(&refs[i]) } else { B4::EMPTY });
-    let mut best = (f32::INFINITY, 0usize, n / 2);
-    let mut best_order = [0u8; SMALL];
-    let mut right_area = [0f32; SMALL];
-    for k in 0..3 {
-        // Insertion sort of (centroid, index): ties keep input order, so the result is
-        // deterministic.
-        let mut order = [0u8; SMALL];
-        let mut key = [0f32; SMALL];
-        for i in 0..n {
-            let c = boxes[i].lo[k] + boxes[i].hi[k];
-            let mut j = i;
-            while j > 0 && key[j - 1] > c {
-                key[j] = key[j - 1];
-                order[j] = order[j - 1];
-                j -= 1;
+    match refs.len() {
+        0..=2 => {
+            // One way to split two (a lone primitive cannot be split; callers never ask).
+            let mid = refs.len() / 2;
+            let (l, r) = refs.split_at(mid);
+            let (l, r) = (RangeInfo::of(l), RangeInfo::of(r));
+            let cost = l.bounds.half_area() + r.bounds.half_area();
+            Split {
+                mid,
+                left: l,
+                right: r,
+                cost,
             }
-            key[j] = c;
-            order[j] = i as u8;
         }
+        3..=8 => sweep_split_n::<8>(refs),
+        _ => sweep_split_n::<SMALL>(refs),
+    }
+}
+
+fn sweep_split_n<const L: usize>(refs: &mut [PrimRef]) -> Split {
+    let n = refs.len().min(L);
+    let mut boxes = [B4::EMPTY; L];
+    // Padding keys are larger than any real one, so they never count.
+    let mut keys = [[i32::MAX; L]; 3];
+    for (i, r) in refs.iter().enumerate().take(L) {
+        boxes[i] = B4::of(r);
+        let c = boxes[i].center2();
+        for k in 0..3 {
+            keys[k][i] = order_key(c[k], i);
+        }
+    }
+    let mut best = (f32::INFINITY, n / 2);
+    let mut best_order = [0u8; L];
+    for key in &keys {
+        let mut order = [0u8; L];
+        for i in 0..n {
+            let ki = key[i];
+            let mut rank = 0u32;
+            for &kj in key {
+                rank += (kj < ki) as u32;
+            }
+            order[rank as usize & (L - 1)] = i as u8;
+        }
+        let mut right_area = [0f32; L];
         let mut acc = B4::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&boxes[order[i] as usize]);
+            acc.grow(&boxes[order[i] as usize & (L - 1)]);
             right_area[i] = acc.half_area();
         }
         let mut acc = B4::EMPTY;
         for i in 1..n {
-            acc.grow(&boxes[order[i - 1] as usize]);
+            acc.grow(&boxes[order[i - 1] as usize & (L - 1)]);
             let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
             if cost < best.0 {
-                best = (cost, k, i);
+                best = (cost, i);
                 best_order = order;
             }
         }
     }
-    let (cost, _, mid) = best;
+    let (cost, mid) = best;
+    let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
     if cost.is_finite() {
-        let copy: [PrimRef; SMALL] = std::array::from_fn(|i| {
+        let copy: [PrimRef; L] = std::array::from_fn(|i| {
             if i < n {
                 refs[i]
             } else {
                 PrimRef::new(&Aabb::EMPTY, 0)
             }
         });
-        for (dst, &src) in refs.iter_mut().zip(&best_order[..n]) {
-            *dst = copy[src as usize];
+        for (i, (dst, &src)) in refs.iter_mut().zip(&best_order[..n]).enumerate() {
+            *dst = copy[src as usize & (L - 1)];
+            if i < mid {
+                left.add(dst);
+            } else {
+                right.add(dst);
+            }
+        }
+    } else {
+        for (i, r) in refs.iter().enumerate() {
+            if i < mid {
+                left.add(r);
+            } else {
+                right.add(r);
+            }
         }
     }
     Split {
         mid,
-        left: RangeInfo::of(&refs[..mid]),
-        right: RangeInfo::of(&refs[mid..]),
+        left: left.info(),
+        right: right.info(),
         cost,
     }
 }
@@ -488,7 +621,10 @@ pub fn build(
     traversal_cost: f32,
 ) -> Tree {
     if refs.is_empty() {
-        return Tree { root: None };
+        return Tree {
+            root: None,
+            nodes: Vec::new(),
+        };
     }
     let ctx = Ctx {
         bins: bins.clamp(2, MAX_BINS),
@@ -496,8 +632,11 @@ pub fn build(
         traversal_cost,
     };
     let info = RangeInfo::of(refs);
+    let mut out = NodeList::with_capacity(node_hint(refs.len()));
+    let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
     Tree {
-        root: Some(build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0)),
+        root: Some(root),
+        nodes: out.nodes,
     }
 }
 
@@ -515,6 +654,7 @@ fn build_child(
     info: RangeInfo,
     ctx: &Ctx,
     depth: u32,
+    out: &mut NodeList,
 ) -> (Aabb, Child) {
     let n = refs.len();
     let leaf = (
@@ -602,20 +742,28 @@ fn build_child(
         aux_rest = atail;
         at = p.end;
     }
-    let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> = slices
+    let me = out.reserve();
+    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
+    if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+        // Subtrees on their own lists, appended in slot order: the same nodes in the same
+        // order as the sequential path below.
+        let built: Vec<((Aabb, Child), NodeList)> = slices
             .into_par_iter()
             .flatten()
-            .map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1))
+            .map(|(s, a, b, i)| {
+                let mut sub = NodeList::with_capacity(node_hint(s.len()));
+                let c = build_child(s, a, b, i, ctx, depth + 1, &mut sub);
+                (c, sub)
+            })
             .collect();
-        InnerNode::new(children)
+        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
+            *slot = (b, out.append(c, sub));
+        }
     } else {
-        InnerNode::new(
-            slices
-                .into_iter()
-                .flatten()
-                .map(|(s, a, b, i)| build_child(s, a, b, i, ctx, depth + 1)),
-        )
-    };
-    (info.bounds, Child::Inner(Box::new(node)))
+        for (slot, (s, a, b, i)) in children.iter_mut().zip(slices.into_iter().flatten()) {
+            *slot = build_child(s, a, b, i, ctx, depth + 1, out);
+        }
+    }
+    out.set(me, InnerNode::new(children.into_iter().take(count)));
+    (info.bounds, Child::Inner(me))
 }

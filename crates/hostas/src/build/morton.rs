@@ -3,7 +3,7 @@
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 
 use super::binned_sah::RangeInfo;
-use super::tree::{Child, InnerNode, Tree};
+use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::WIDTH;
 use crate::math::Aabb;
@@ -20,30 +20,43 @@ fn spread(v: u32) -> u32 {
     x
 }
 
-/// Sorts `keys` (LSD radix, 8 bits a pass over the 32 code bits in the high half).
+/// Bits per radix-sort digit: three passes over the 30 code bits.
+const DIGIT: u32 = 10;
+
+/// Sorts `keys` by their high half (the 30-bit code; the low half, a position, keeps equal
+/// codes in input order): LSD radix, three passes of 10 bits with all histograms counted in
+/// one first pass. The sorted keys end up in `tmp`.
 fn radix_sort(keys: &mut [u64], tmp: &mut [u64]) {
     let n = keys.len();
-    let (mut src, mut dst) = (keys, &mut tmp[..n]);
-    for pass in 0..4 {
-        let shift = 32 + 8 * pass;
-        let mut counts = [0usize; 256];
-        for k in src.iter() {
-            counts[((k >> shift) & 0xff) as usize] += 1;
-        }
+    const B: usize = 1 << DIGIT;
+    let mut counts = vec![[0u32; B]; 3];
+    for &k in keys.iter() {
+        let c = (k >> 32) as usize;
+        counts[0][c & (B - 1)] += 1;
+        counts[1][(c >> DIGIT) & (B - 1)] += 1;
+        counts[2][(c >> (2 * DIGIT)) & (B - 1)] += 1;
+    }
+    for h in counts.iter_mut() {
         let mut sum = 0;
-        for c in counts.iter_mut() {
+        for c in h.iter_mut() {
             let v = *c;
             *c = sum;
             sum += v;
         }
+    }
+    let (mut src, mut dst) = (keys, &mut tmp[..n]);
+    for (pass, h) in counts.iter_mut().enumerate() {
+        let shift = 32 + DIGIT * pass as u32;
         for &k in src.iter() {
-            let b = ((k >> shift) & 0xff) as usize;
-            dst[counts[b]] = k;
-            counts[b] += 1;
+            let b = (k >> shift) as usize & (B - 1);
+            if let Some(d) = dst.get_mut(h[b] as usize) {
+                *d = k;
+            }
+            h[b] += 1;
         }
         std::mem::swap(&mut src, &mut dst);
     }
-    // Four passes: the sorted data is back in `keys`.
+    // Three passes: the sorted keys are in `tmp`.
 }
 
 pub fn build(
@@ -55,7 +68,10 @@ pub fn build(
 ) -> Tree {
     let n = refs.len();
     if n == 0 {
-        return Tree { root: None };
+        return Tree {
+            root: None,
+            nodes: Vec::new(),
+        };
     }
     let info = RangeInfo::of(refs);
     let c = info.centroids;
@@ -77,38 +93,44 @@ pub fn build(
             *k = (code(r) as u64) << 32 | i as u64;
         });
     radix_sort(&mut keys[..n], tmp);
-    // The sorted codes, for splitting.
-    tmp[..n]
+    let sorted = &tmp[..n];
+    // The sorted codes (in the space of `keys`, now free), for splitting.
+    let codes: &mut [u32] = &mut bytemuck::cast_slice_mut(&mut keys[..n])[..n];
+    codes
         .par_iter_mut()
-        .zip(keys[..n].par_iter())
+        .zip(sorted.par_iter())
         .with_min_len(PARALLEL_THRESHOLD)
-        .for_each(|(t, k)| {
-            *t = k >> 32;
+        .for_each(|(c, k)| {
+            *c = (k >> 32) as u32;
         });
     // Put the references in sorted order, so leaves read their bounds sequentially.
     aux[..n]
         .par_iter_mut()
-        .zip(keys[..n].par_iter())
+        .zip(sorted.par_iter())
         .with_min_len(PARALLEL_THRESHOLD)
         .for_each(|(a, k)| *a = refs[(*k & 0xffff_ffff) as usize]);
     refs.par_iter_mut()
         .zip(aux[..n].par_iter())
         .with_min_len(PARALLEL_THRESHOLD)
         .for_each(|(r, a)| *r = *a);
-    let codes = &tmp[..n];
-    let root = build_child(refs, codes, 0, max_leaf.max(4), 0);
-    Tree { root: Some(root) }
+    let codes = &*codes;
+    let mut out = NodeList::with_capacity(node_hint(n));
+    let root = build_child(refs, codes, 0, max_leaf.max(4), 0, &mut out);
+    Tree {
+        root: Some(root),
+        nodes: out.nodes,
+    }
 }
 
 /// Position of the first code in `codes` that differs from the first in the highest differing
 /// bit, or the middle when all codes are equal.
-fn split_point(codes: &[u64]) -> usize {
+fn split_point(codes: &[u32]) -> usize {
     let (first, last) = (codes[0], codes[codes.len() - 1]);
     if first == last {
         return codes.len() / 2;
     }
-    let bit = 63 - (first ^ last).leading_zeros();
-    let mask = !((1u64 << bit) - 1) & 0xffff_ffff;
+    let bit = 31 - (first ^ last).leading_zeros();
+    let mask = !((1u32 << bit) - 1);
     let prefix = first & mask;
     // codes are sorted: the first one with the bit set starts the right half.
     codes.partition_point(|&c| (c & mask) == prefix)
@@ -116,10 +138,11 @@ fn split_point(codes: &[u64]) -> usize {
 
 fn build_child(
     refs: &[PrimRef],
-    codes: &[u64],
+    codes: &[u32],
     base: u32,
     max_leaf: usize,
     depth: u32,
+    out: &mut NodeList,
 ) -> (Aabb, Child) {
     let n = refs.len();
     if n <= max_leaf.max(WIDTH - 1) {
@@ -156,25 +179,46 @@ fn build_child(
         parts[count] = (b + mid, e);
     }
     parts.sort_by_key(|&(b, e)| (e == b, b));
-    let build = |&(b, e): &(usize, usize)| {
-        build_child(
-            &refs[b..e],
-            &codes[b..e],
-            base + b as u32,
-            max_leaf,
-            depth + 1,
-        )
-    };
-    let node = if n > PARALLEL_THRESHOLD {
-        let children: Vec<(Aabb, Child)> =
-            parts.par_iter().filter(|p| p.1 > p.0).map(build).collect();
-        InnerNode::new(children)
+    let me = out.reserve();
+    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
+    let live = parts.iter().filter(|p| p.1 > p.0).count();
+    let parts = parts.iter().filter(|p| p.1 > p.0);
+    if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+        let built: Vec<((Aabb, Child), NodeList)> = parts
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|&(b, e)| {
+                let mut sub = NodeList::with_capacity(node_hint(e - b));
+                let c = build_child(
+                    &refs[b..e],
+                    &codes[b..e],
+                    base + b as u32,
+                    max_leaf,
+                    depth + 1,
+                    &mut sub,
+                );
+                (c, sub)
+            })
+            .collect();
+        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
+            *slot = (b, out.append(c, sub));
+        }
     } else {
-        InnerNode::new(parts.iter().filter(|p| p.1 > p.0).map(build))
-    };
+        for (slot, &(b, e)) in children.iter_mut().zip(parts) {
+            *slot = build_child(
+                &refs[b..e],
+                &codes[b..e],
+                base + b as u32,
+                max_leaf,
+                depth + 1,
+                out,
+            );
+        }
+    }
     let mut bounds = Aabb::EMPTY;
-    for (b, _) in node.children() {
+    for (b, _) in &children[..live] {
         bounds = bounds.union(b);
     }
-    (bounds, Child::Inner(Box::new(node)))
+    out.set(me, InnerNode::new(children.into_iter().take(live)));
+    (bounds, Child::Inner(me))
 }

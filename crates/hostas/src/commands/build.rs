@@ -742,6 +742,9 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scrat
 /// Decodes all triangles or AABBs into `data` (indexed by sequence number) and writes a
 /// `PrimRef` per active primitive into `refs`; returns how many are active. Parallel over
 /// chunks; the first error in primitive order is reported.
+///
+/// Each primitive's reference is first written at its sequence number (an inactive one marked
+/// by `pad = 1`); when some are inactive, one pass then closes the gaps in order.
 fn decode_geometries(
     readers: &[Reader],
     records: &[GeometryRecord],
@@ -749,7 +752,7 @@ fn decode_geometries(
     data: &mut [u8],
 ) -> Result<usize> {
     const CHUNK: usize = 4096;
-    let mut stored = 0usize;
+    let mut inactive = 0usize;
     for (reader, rec) in readers.iter().zip(records) {
         let first = rec.first_primitive as usize;
         let count = rec.primitive_count as usize;
@@ -758,15 +761,19 @@ fn decode_geometries(
             _ => 24,
         };
         let geom_data = &mut data[first * size..(first + count) * size];
-        // Pass 1: decode in parallel; bounds NaN marks inactive.
-        let results: Vec<Result<()>> = geom_data
+        let geom_refs = &mut refs[first..first + count];
+        let results: Vec<Result<usize>> = geom_data
             .par_chunks_mut(CHUNK * size)
+            .zip(geom_refs.par_chunks_mut(CHUNK))
             .enumerate()
-            .map(|(c, chunk)| {
-                for (j, out) in chunk.chunks_exact_mut(size).enumerate() {
-                    let i = (c * CHUNK + j) as u32;
-                    match reader {
-                        Reader::Triangles(t) => {
+            .map(|(c, (chunk, chunk_refs))| {
+                let mut inactive = 0;
+                let base = c * CHUNK;
+                match reader {
+                    Reader::Triangles(t) => {
+                        let outs = chunk.chunks_exact_mut(TRI_BYTES);
+                        for (j, (out, r)) in outs.zip(chunk_refs.iter_mut()).enumerate() {
+                            let i = (base + j) as u32;
                             let f = match t.triangle_fast(i) {
                                 Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
                                 _ => match t.triangle(i)? {
@@ -777,47 +784,63 @@ fn decode_geometries(
                                     None => [f32::NAN; 9],
                                 },
                             };
-                            out.copy_from_slice(bytemuck::cast_slice(&f));
+                            let out: &mut [u8; TRI_BYTES] =
+                                out.try_into().map_err(|_| internal("triangle slot"))?;
+                            *out = bytemuck::cast(f);
+                            let mut b = Aabb::point([f[0], f[1], f[2]]);
+                            b.grow([f[3], f[4], f[5]]);
+                            b.grow([f[6], f[7], f[8]]);
+                            let dead = f[0].is_nan();
+                            inactive += dead as usize;
+                            *r = PrimRef::new(&b, (first + base + j) as u32);
+                            r.pad = dead as u32;
                         }
-                        Reader::Aabbs(a) => {
-                            let f: [f32; 6] = match a.aabb(i)? {
-                                Some(b) => [b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]],
-                                None => [f32::NAN; 6],
-                            };
-                            out.copy_from_slice(bytemuck::cast_slice(&f));
-                        }
-                        Reader::Instances(_) => {}
                     }
+                    Reader::Aabbs(a) => {
+                        let outs = chunk.chunks_exact_mut(24);
+                        for (j, (out, r)) in outs.zip(chunk_refs.iter_mut()).enumerate() {
+                            let i = (base + j) as u32;
+                            let b = a.aabb(i)?.unwrap_or(Aabb {
+                                lo: [f32::NAN; 3],
+                                hi: [f32::NAN; 3],
+                            });
+                            let f = [b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]];
+                            let out: &mut [u8; 24] =
+                                out.try_into().map_err(|_| internal("box slot"))?;
+                            *out = bytemuck::cast(f);
+                            let dead = f[0].is_nan();
+                            inactive += dead as usize;
+                            *r = PrimRef::new(&b, (first + base + j) as u32);
+                            r.pad = dead as u32;
+                        }
+                    }
+                    Reader::Instances(_) => {}
                 }
-                Ok(())
+                Ok(inactive)
             })
             .collect();
         for r in results {
-            r?;
+            inactive += r?;
         }
-        // Pass 2: references for the active primitives, in order.
-        for (i, p) in geom_data.chunks_exact(size).enumerate() {
-            let f =
-                |k: usize| f32::from_le_bytes([p[4 * k], p[4 * k + 1], p[4 * k + 2], p[4 * k + 3]]);
-            if f(0).is_nan() {
-                continue;
-            }
-            let b = if size == TRI_BYTES {
-                let mut b = Aabb::point([f(0), f(1), f(2)]);
-                b.grow([f(3), f(4), f(5)]);
-                b.grow([f(6), f(7), f(8)]);
-                b
-            } else {
-                Aabb {
-                    lo: [f(0), f(1), f(2)],
-                    hi: [f(3), f(4), f(5)],
-                }
-            };
-            refs[stored] = PrimRef::new(&b, (first + i) as u32);
+    }
+    let total: usize = records.iter().map(|r| r.primitive_count as usize).sum();
+    if inactive == 0 {
+        return Ok(total);
+    }
+    // Close the gaps left by inactive primitives, keeping the order.
+    let mut stored = 0usize;
+    for i in 0..total {
+        let r = refs[i];
+        if r.pad == 0 {
+            refs[stored] = r;
             stored += 1;
         }
     }
     Ok(stored)
+}
+
+fn internal(what: &str) -> Error {
+    Error::NotSupported(format!("internal: {what}"))
 }
 
 /// Writes the primitive sections in the tree's final order.
@@ -838,15 +861,34 @@ fn write_prims(
         .with_min_len(4096)
         .for_each(|(o, r)| *o = r.id);
     let prims = &mut head[h.prims_offset as usize..h.prims_offset as usize + size * n];
-    if size > 0 {
+    // Fixed-size copies (a copy of a run-time length is a call per primitive).
+    fn gather<const S: usize>(prims: &mut [u8], refs: &[PrimRef], data: &[u8]) {
         prims
+            .par_chunks_mut(S)
+            .zip(refs.par_iter())
+            .with_min_len(1024)
+            .for_each(|(out, r)| {
+                let at = r.id as usize * S;
+                if let (Ok(out), Some(Ok(src))) = (
+                    <&mut [u8; S]>::try_from(out),
+                    data.get(at..at + S).map(<&[u8; S]>::try_from),
+                ) {
+                    *out = *src;
+                }
+            });
+    }
+    match size {
+        0 => {}
+        TRI_BYTES => gather::<TRI_BYTES>(prims, refs, data),
+        24 => gather::<24>(prims, refs, data),
+        _ => prims
             .par_chunks_mut(size)
             .zip(refs.par_iter())
             .with_min_len(1024)
             .for_each(|(out, r)| {
                 let at = r.id as usize * size;
                 out.copy_from_slice(&data[at..at + size]);
-            });
+            }),
     }
     Ok(())
 }

@@ -4,7 +4,7 @@
 
 use super::plan::Plan;
 use super::{
-    GeometryRecord, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node, WIDTH,
+    GeometryRecord, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node,
 };
 use crate::build::tree::{Child, InnerNode, Tree};
 use crate::error::{Error, Result};
@@ -63,34 +63,32 @@ pub fn encode(
         Some((b, _)) => b.half_area(),
         None => 0.0,
     };
-    let w = Writer { root_area };
     let (bounds, node_count, depth, sah) = match &tree.root {
         None => (Aabb::EMPTY, 0, 0, 0.0),
-        Some((b, child)) => match child {
-            Child::Inner(inner) => {
-                let count = inner.nodes as usize;
-                if count > nodes.len() {
-                    return Err(Error::OutOfHostMemory(format!(
-                        "tree needs {count} nodes, the plan has {}",
-                        nodes.len()
-                    )));
-                }
-                let (sah, depth) = w.write(inner, &mut nodes[..count], 0, 1)?;
-                (*b, count as u32, depth, sah + SAH_NODE_COST)
+        Some((b, Child::Inner(_))) => {
+            let count = tree.nodes.len();
+            if count > nodes.len() {
+                return Err(Error::OutOfHostMemory(format!(
+                    "tree needs {count} nodes, the plan has {}",
+                    nodes.len()
+                )));
             }
-            Child::Leaf { first, count } => {
-                // A single leaf still gets a node, so traversal always starts at node 0.
-                let mut node = Node::EMPTY;
-                node.set_bounds(0, b);
-                node.child[0] = LEAF_BIT | first;
-                node.count[0] = *count as u8;
-                let slot = nodes
-                    .first_mut()
-                    .ok_or_else(|| Error::OutOfHostMemory("no room for the root node".into()))?;
-                *slot = node;
-                (*b, 1, 1, SAH_NODE_COST + SAH_PRIM_COST * *count as f32)
-            }
-        },
+            let depth = check_depth(&tree.nodes)?;
+            let sah = write_nodes(&tree.nodes, &mut nodes[..count], root_area);
+            (*b, count as u32, depth, sah + SAH_NODE_COST)
+        }
+        Some((b, Child::Leaf { first, count })) => {
+            // A single leaf still gets a node, so traversal always starts at node 0.
+            let mut node = Node::EMPTY;
+            node.set_bounds(0, b);
+            node.child[0] = LEAF_BIT | first;
+            node.count[0] = *count as u8;
+            let slot = nodes
+                .first_mut()
+                .ok_or_else(|| Error::OutOfHostMemory("no room for the root node".into()))?;
+            *slot = node;
+            (*b, 1, 1, SAH_NODE_COST + SAH_PRIM_COST * *count as f32)
+        }
     };
     let header = Header {
         magic: MAGIC,
@@ -121,87 +119,81 @@ pub fn encode(
     Ok(header)
 }
 
-struct Writer {
-    root_area: f32,
+/// Checks that every inner child comes after its parent (the depth-first order the builders
+/// promise) and returns the depth, at most `MAX_DEPTH`.
+fn check_depth(tree: &[InnerNode]) -> Result<u32> {
+    let mut depth = vec![0u8; tree.len()];
+    let mut max = 1;
+    if let Some(d) = depth.first_mut() {
+        *d = 1;
+    }
+    for (i, node) in tree.iter().enumerate() {
+        let d = depth[i];
+        for (_, c) in node.children() {
+            if let Child::Inner(j) = *c {
+                let j = j as usize;
+                if j <= i || j >= tree.len() {
+                    return Err(Error::OutOfHostMemory(format!(
+                        "tree node {i} has child {j} out of order"
+                    )));
+                }
+                depth[j] = d + 1;
+                max = max.max(d as u32 + 1);
+                if max > MAX_DEPTH {
+                    return Err(Error::OutOfHostMemory(format!(
+                        "tree deeper than {MAX_DEPTH}"
+                    )));
+                }
+            }
+        }
+    }
+    Ok(max)
 }
 
-/// Subtrees with more nodes than this are written on another thread.
-const PARALLEL_NODES: u32 = 2048;
+/// Node chunks written (and their SAH summed) per task; the sum is over fixed chunks in order,
+/// so the result does not depend on the thread count.
+const CHUNK_NODES: usize = 1024;
 
-impl Writer {
-    fn rel_area(&self, b: &Aabb) -> f32 {
-        if self.root_area > 0.0 {
-            b.half_area() / self.root_area
+/// Writes the tree's nodes (index for index: the tree is already in the layout's order) and
+/// returns their SAH contribution below the root's own visit.
+fn write_nodes(tree: &[InnerNode], out: &mut [Node], root_area: f32) -> f32 {
+    let inv_root = if root_area > 0.0 {
+        1.0 / root_area as f64
+    } else {
+        0.0
+    };
+    let rel_area = |b: &Aabb| -> f64 {
+        if root_area > 0.0 {
+            b.half_area() as f64 * inv_root
         } else {
             1.0
         }
-    }
-
-    /// Writes `inner` at `out[0]` and its subtree after it, in depth-first order; `index` is
-    /// the global index of `out[0]`. Returns the subtree's SAH contribution (below this node's
-    /// own visit) and its depth.
-    fn write(
-        &self,
-        inner: &InnerNode,
-        out: &mut [Node],
-        index: u32,
-        depth: u32,
-    ) -> Result<(f32, u32)> {
-        if depth > MAX_DEPTH {
-            return Err(Error::OutOfHostMemory(format!(
-                "tree deeper than {MAX_DEPTH}"
-            )));
-        }
-        let (me, mut rest) = out
-            .split_first_mut()
-            .ok_or_else(|| Error::OutOfHostMemory("node plan exceeded".into()))?;
-        let mut node = Node::EMPTY;
-        let mut sah = 0.0;
-        let mut next = index + 1;
-        // Children's subtrees take consecutive ranges of `rest`, in slot order.
-        let mut jobs: [Option<(&InnerNode, &mut [Node], u32)>; WIDTH] = Default::default();
-        for (k, (b, c)) in inner.children().iter().enumerate() {
-            node.set_bounds(k, b);
-            match c {
-                Child::Leaf { first, count } => {
-                    node.child[k] = LEAF_BIT | first;
-                    node.count[k] = *count as u8;
-                    sah += SAH_PRIM_COST * *count as f32 * self.rel_area(b);
+    };
+    let sums: Vec<f64> = out
+        .par_chunks_mut(CHUNK_NODES)
+        .zip(tree.par_chunks(CHUNK_NODES))
+        .map(|(out, tree)| {
+            let mut sah = 0.0f64;
+            for (o, inner) in out.iter_mut().zip(tree) {
+                let mut node = Node::EMPTY;
+                for (k, (b, c)) in inner.children().iter().enumerate() {
+                    node.set_bounds(k, b);
+                    match *c {
+                        Child::Leaf { first, count } => {
+                            node.child[k] = LEAF_BIT | first;
+                            node.count[k] = count as u8;
+                            sah += (SAH_PRIM_COST * count as f32) as f64 * rel_area(b);
+                        }
+                        Child::Inner(i) => {
+                            node.child[k] = i;
+                            sah += SAH_NODE_COST as f64 * rel_area(b);
+                        }
+                    }
                 }
-                Child::Inner(sub) => {
-                    node.child[k] = next;
-                    sah += SAH_NODE_COST * self.rel_area(b);
-                    let n = (sub.nodes as usize).min(rest.len());
-                    let (mine, tail) = std::mem::take(&mut rest).split_at_mut(n);
-                    jobs[k] = Some((sub, mine, next));
-                    rest = tail;
-                    next += sub.nodes;
-                }
+                *o = node;
             }
-        }
-        *me = node;
-        let run = |j: Option<(&InnerNode, &mut [Node], u32)>| -> Result<(f32, u32)> {
-            match j {
-                Some((sub, slice, idx)) => self.write(sub, slice, idx, depth + 1),
-                None => Ok((0.0, depth)),
-            }
-        };
-        let mut max_depth = depth;
-        if inner.nodes > PARALLEL_NODES {
-            let results: Vec<Result<(f32, u32)>> = jobs.into_par_iter().map(run).collect();
-            for r in results {
-                let (s, d) = r?;
-                sah += s;
-                max_depth = max_depth.max(d);
-            }
-        } else {
-            // Small subtrees: no collection (this runs once per node).
-            for j in jobs {
-                let (s, d) = run(j)?;
-                sah += s;
-                max_depth = max_depth.max(d);
-            }
-        }
-        Ok((sah, max_depth))
-    }
+            sah
+        })
+        .collect();
+    sums.iter().sum::<f64>() as f32
 }

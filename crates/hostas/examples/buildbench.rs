@@ -1,0 +1,133 @@
+//! Build speed only, into memory and scratch allocated once (as `hostas bench` measures), on
+//! generated scenes: `buildbench SCENE PRESET [REPS]` with SCENE `sphere:N` (2N² triangles) or
+//! `soup:N` (N random triangles, centres in [0,100]³, vertices within ±1, as bench/peers) and
+//! PRESET one of fast-trace, fast-build, default, low-memory. Prints the median build time,
+//! Mtris/s and the SAH cost. With REPS = 1 it is cheap enough to run under callgrind.
+
+use hostas::{AccelerationStructureCreateInfo, BuildGeometryInfo, Device, vk};
+use std::time::Instant;
+
+fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut p = Vec::new();
+    let mut idx = Vec::new();
+    for i in 0..=n {
+        let th = std::f32::consts::PI * i as f32 / n as f32;
+        for j in 0..=2 * n {
+            let ph = std::f32::consts::PI * j as f32 / n as f32;
+            p.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
+        }
+    }
+    let w = 2 * n + 1;
+    for i in 0..n {
+        for j in 0..2 * n {
+            let a = i * w + j;
+            idx.push([a, a + w, a + 1]);
+            idx.push([a + 1, a + w, a + w + 1]);
+        }
+    }
+    (p, idx)
+}
+
+fn soup(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut seed = 0x9e37_79b9u32;
+    let mut rnd = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 17;
+        seed ^= seed << 5;
+        seed as f32 / u32::MAX as f32
+    };
+    let mut p = Vec::with_capacity(3 * n as usize);
+    let mut idx = Vec::with_capacity(n as usize);
+    for t in 0..n {
+        let c = [rnd() * 100.0, rnd() * 100.0, rnd() * 100.0];
+        for _ in 0..3 {
+            p.push([
+                c[0] + rnd() * 2.0 - 1.0,
+                c[1] + rnd() * 2.0 - 1.0,
+                c[2] + rnd() * 2.0 - 1.0,
+            ]);
+        }
+        idx.push([3 * t, 3 * t + 1, 3 * t + 2]);
+    }
+    (p, idx)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let scene = args.get(1).map(String::as_str).unwrap_or("sphere:500");
+    let preset = args.get(2).map(String::as_str).unwrap_or("fast-trace");
+    let reps: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5);
+    let (kind, n) = scene.split_once(':').unwrap_or((scene, "500"));
+    let n: u32 = n.parse().expect("scene size");
+    let (p, idx) = match kind {
+        "sphere" => sphere(n),
+        "soup" => soup(n),
+        _ => panic!("unknown scene {kind}"),
+    };
+    use vk::BuildAccelerationStructureFlagsKHR as F;
+    let flags = match preset {
+        "fast-trace" => F::PREFER_FAST_TRACE,
+        "fast-build" => F::PREFER_FAST_BUILD,
+        "low-memory" => F::LOW_MEMORY,
+        _ => F::empty(),
+    };
+    let device = Device::new();
+    let geoms = [hostas::quick::triangle_mesh(
+        &p,
+        &idx,
+        vk::GeometryFlagsKHR::OPAQUE,
+    )];
+    let mut info = BuildGeometryInfo {
+        ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+        flags,
+        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
+        src: None,
+        dst: None,
+        geometries: &geoms,
+        scratch: None,
+    };
+    let sizes = device
+        .build_sizes(
+            vk::AccelerationStructureBuildTypeKHR::HOST,
+            &info,
+            &[idx.len() as u32],
+        )
+        .unwrap();
+    let dst = device
+        .create_acceleration_structure(&AccelerationStructureCreateInfo::new(
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            sizes.acceleration_structure_size,
+        ))
+        .unwrap();
+    let mut scratch = vec![0u8; sizes.build_scratch_size as usize];
+    let range = [hostas::BuildRangeInfo {
+        primitive_count: idx.len() as u32,
+        ..Default::default()
+    }];
+    info.dst = Some(dst);
+    let mut times = Vec::new();
+    for _ in 0..reps.max(1) {
+        let info = BuildGeometryInfo {
+            scratch: Some(&mut scratch),
+            ..info
+        };
+        let t = Instant::now();
+        device
+            .build_acceleration_structures(&mut [info], &[&range])
+            .unwrap();
+        times.push(t.elapsed().as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    let med = times[times.len() / 2];
+    let s = device.statistics(dst).unwrap();
+    println!(
+        "{scene} {preset} ({} tris, {} threads): {:.1} ms (min {:.1}), {:.2} Mtris/s, SAH {:.3}, {} nodes",
+        idx.len(),
+        rayon::current_num_threads(),
+        med * 1e3,
+        times[0] * 1e3,
+        idx.len() as f64 / med / 1e6,
+        s.sah_cost,
+        s.node_count
+    );
+}
