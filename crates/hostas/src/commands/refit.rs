@@ -121,6 +121,31 @@ trait Source: Sync {
         }
         Some(b)
     }
+
+    /// Decodes the leaves of `node` (a node of leaves only), `counts[k]` primitives for slot
+    /// `k` (0: unused slot), consecutive in `ids` and `out`; sets each leaf's box in `node`
+    /// and returns their union (in slot order, from [`Aabb::EMPTY`]).
+    #[inline(always)]
+    fn leaves(
+        &self,
+        ids: &[u32],
+        out: &mut [Self::Prim],
+        counts: &[u8; WIDTH],
+        node: &mut Node,
+    ) -> Option<Aabb> {
+        let mut at = 0;
+        let mut total = Aabb::EMPTY;
+        for (k, &n) in counts.iter().enumerate() {
+            let n = n as usize;
+            if n > 0 {
+                let b = self.leaf(ids.get(at..at + n)?, out.get_mut(at..at + n)?)?;
+                node.set_bounds(k, &b);
+                total = total.union(&b);
+                at += n;
+            }
+        }
+        Some(total)
+    }
 }
 
 /// A triangle's box, as the general path computes it.
@@ -248,10 +273,26 @@ impl<const IDX: usize, const TIGHT: bool> Source for TriF32<'_, IDX, TIGHT> {
         Some((f, triangle_box(&f)))
     }
 
-    /// The same operations as the default, in a loop of its own.
+    /// The same operations as the default.
     #[inline(always)]
     fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Aabb> {
-        let (lo, hi) = self.leaf_box(ids, out)?;
+        let (lo, hi) = self.one_leaf_box(ids, out)?;
+        Some(Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        })
+    }
+
+    /// The same operations as the default, in a function of its own (one call per node).
+    #[inline(always)]
+    fn leaves(
+        &self,
+        ids: &[u32],
+        out: &mut [[f32; 9]],
+        counts: &[u8; WIDTH],
+        node: &mut Node,
+    ) -> Option<Aabb> {
+        let (lo, hi) = self.leaves_box(ids, out, counts, node)?;
         Some(Aabb {
             lo: [lo[0], lo[1], lo[2]],
             hi: [hi[0], hi[1], hi[2]],
@@ -260,9 +301,51 @@ impl<const IDX: usize, const TIGHT: bool> Source for TriF32<'_, IDX, TIGHT> {
 }
 
 impl<const IDX: usize, const TIGHT: bool> TriF32<'_, IDX, TIGHT> {
+    /// [`Source::leaves`], the union as two four-lane arrays.
+    #[inline(never)]
+    fn leaves_box(
+        &self,
+        ids: &[u32],
+        out: &mut [[f32; 9]],
+        counts: &[u8; WIDTH],
+        node: &mut Node,
+    ) -> Option<([f32; 4], [f32; 4])> {
+        use crate::math::{fmax, fmin};
+        let mut at = 0;
+        let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
+        let (mut hx, mut hy, mut hz) = (f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for (k, &n) in counts.iter().enumerate() {
+            let n = n as usize;
+            if n > 0 {
+                let (lo, hi) = self.leaf_box(ids.get(at..at + n)?, out.get_mut(at..at + n)?)?;
+                node.lo_x[k] = lo[0];
+                node.lo_y[k] = lo[1];
+                node.lo_z[k] = lo[2];
+                node.hi_x[k] = hi[0];
+                node.hi_y[k] = hi[1];
+                node.hi_z[k] = hi[2];
+                // Aabb::union, in slot order.
+                lx = fmin(lx, lo[0]);
+                ly = fmin(ly, lo[1]);
+                lz = fmin(lz, lo[2]);
+                hx = fmax(hx, hi[0]);
+                hy = fmax(hy, hi[1]);
+                hz = fmax(hz, hi[2]);
+                at += n;
+            }
+        }
+        Some(([lx, ly, lz, 0.0], [hx, hy, hz, 0.0]))
+    }
+
+    /// [`Self::leaf_box`] in a function of its own.
+    #[inline(never)]
+    fn one_leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
+        self.leaf_box(ids, out)
+    }
+
     /// [`Source::leaf`], the box as two four-lane arrays. (Six scalars and this return type
     /// keep the compiler from vectorizing the minima into compare-and-blend sequences.)
-    #[inline(never)]
+    #[inline(always)]
     fn leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
         use crate::math::{fmax, fmin};
         let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
@@ -644,41 +727,72 @@ fn walk<S: Source>(
         let n = nodes.get(li)?;
         (n.child, n.count)
     };
-    let mut total = Aabb::EMPTY;
-    for k in 0..WIDTH {
-        let c = child[k];
-        if c == EMPTY_CHILD {
-            continue;
+    if child.iter().all(|&c| c == EMPTY_CHILD || c & LEAF_BIT != 0) {
+        // A node of leaves only (most of them): one call decodes them all.
+        let start = at.prim;
+        let mut counts = [0u8; WIDTH];
+        for k in 0..WIDTH {
+            let c = child[k];
+            if c == EMPTY_CHILD {
+                continue;
+            }
+            if (c & !LEAF_BIT) as usize != at.prim || count[k] == 0 {
+                return None;
+            }
+            counts[k] = count[k];
+            at.prim += count[k] as usize;
         }
-        let b = if c & LEAF_BIT != 0 {
-            let first = (c & !LEAF_BIT) as usize;
-            let n = count[k] as usize;
-            if first != at.prim {
-                return None;
+        let (lo, hi) = (start.checked_sub(prim_base)?, at.prim - prim_base);
+        return src.leaves(
+            ids.get(lo..hi)?,
+            prims.get_mut(lo..hi)?,
+            &counts,
+            nodes.get_mut(li)?,
+        );
+    }
+    let mut boxes = [Aabb::EMPTY; WIDTH];
+    {
+        for k in 0..WIDTH {
+            let c = child[k];
+            if c == EMPTY_CHILD {
+                continue;
             }
-            let lo = first.checked_sub(prim_base)?;
-            at.prim += n;
-            src.leaf(ids.get(lo..lo + n)?, prims.get_mut(lo..lo + n)?)?
-        } else {
-            let c = c as usize;
-            if c != at.node {
-                return None;
-            }
-            at.node += 1;
-            walk(
-                src,
-                ids,
-                nodes,
-                prims,
-                node_base,
-                prim_base,
-                c,
-                at,
-                depth + 1,
-            )?
-        };
-        nodes[li].set_bounds(k, &b);
-        total = total.union(&b);
+            boxes[k] = if c & LEAF_BIT != 0 {
+                let first = (c & !LEAF_BIT) as usize;
+                let n = count[k] as usize;
+                if first != at.prim || n == 0 {
+                    return None;
+                }
+                let lo = first.checked_sub(prim_base)?;
+                at.prim += n;
+                src.leaf(ids.get(lo..lo + n)?, prims.get_mut(lo..lo + n)?)?
+            } else {
+                let c = c as usize;
+                if c != at.node {
+                    return None;
+                }
+                at.node += 1;
+                walk(
+                    src,
+                    ids,
+                    nodes,
+                    prims,
+                    node_base,
+                    prim_base,
+                    c,
+                    at,
+                    depth + 1,
+                )?
+            };
+        }
+    }
+    let node = nodes.get_mut(li)?;
+    let mut total = Aabb::EMPTY;
+    for (k, b) in boxes.iter().enumerate() {
+        if child[k] != EMPTY_CHILD {
+            node.set_bounds(k, b);
+            total = total.union(b);
+        }
     }
     Some(total)
 }
