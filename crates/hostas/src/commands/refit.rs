@@ -1401,7 +1401,7 @@ mod tests {
             )
             .unwrap(),
         )];
-        let h = *View::parse(&src).unwrap().header;
+        let h = *View::parse(src).unwrap().header;
         let node = |i: usize| h.nodes_offset as usize + 256 * i;
         let child = |i: usize, k: usize| node(i) + 192 + 4 * k;
         let count = |i: usize, k: usize| node(i) + 224 + k;
