@@ -688,13 +688,29 @@ impl Device {
                 h.allocated_size = bytes.len() as u64;
                 bytes[..256].copy_from_slice(bytemuck::bytes_of(&h));
             }
-            let view = View::parse(bytes).map_err(|reason| Error::NotBuilt {
+            let not_built = |reason| Error::NotBuilt {
                 handle: src.handle,
                 reason,
-            })?;
-            check_update_geometries(view.geometries, &records, at)?;
+            };
+            // The whole source is validated as View::parse does, in two steps: the header,
+            // sections and geometry records here, the primitive ids and the tree as the refit
+            // walks it (or, where it cannot, by View::parse before anything else is reported).
+            let validate = |b: &[u8]| View::parse(b).map(|_| ()).map_err(not_built);
+            let view = View::parse_sections(bytes).map_err(not_built)?;
             let header = *view.header;
-            super::refit::refit(bytes, &header, prim_kind, &readers, &instance_updates, at)
+            if let Err(e) = check_update_geometries(view.geometries, &records, at) {
+                validate(bytes)?;
+                return Err(e);
+            }
+            super::refit::refit(
+                bytes,
+                &header,
+                prim_kind,
+                &readers,
+                &instance_updates,
+                at,
+                &validate,
+            )
         })
     }
 }

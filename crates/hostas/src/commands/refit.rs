@@ -19,12 +19,15 @@ use crate::input::aabbs::AabbReader;
 use crate::input::triangles::{F32Layout, TriangleReader};
 use crate::layout::{
     EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
-    NODE_SIZE, Node, PrimKind, WIDTH,
+    MAX_LEAF_SIZE, NODE_SIZE, Node, PrimKind, WIDTH,
 };
 use crate::math::Aabb;
 use rayon::prelude::*;
 
-/// Refits the structure in `bytes` (already validated by `View::parse`; `h` is its header).
+/// Refits the structure in `bytes`, whose header (`h`), sections and geometry records
+/// `View::parse_sections` accepted. `validate` is the rest of `View::parse` (ids, tree): the
+/// fast path checks the same as it goes, and anything else runs `validate` first, so that an
+/// invalid structure is reported as such before any other error.
 pub(super) fn refit(
     bytes: &mut [u8],
     h: &Header,
@@ -32,9 +35,13 @@ pub(super) fn refit(
     readers: &[Reader],
     instances: &[(InstanceRecord, Aabb)],
     at: Location,
+    validate: &dyn Fn(&[u8]) -> Result<()>,
 ) -> Result<()> {
     if matches!(prim_kind, PrimKind::Triangles | PrimKind::Aabbs) {
-        check_still_inactive(bytes, h, readers, at)?;
+        if h.stored_count < h.primitive_count {
+            validate(bytes)?;
+            check_still_inactive(bytes, h, readers, at)?;
+        }
         if let Some(root) = fused(bytes, h, prim_kind, readers) {
             let mut header = *h;
             header.bounds = root;
@@ -42,6 +49,7 @@ pub(super) fn refit(
             return Ok(());
         }
     }
+    validate(bytes)?;
     general(bytes, h, prim_kind, readers, instances, at)
 }
 
@@ -120,6 +128,31 @@ trait Source: Sync {
             b = b.union(&pb);
         }
         Some(b)
+    }
+
+    /// Decodes the leaves of `node` (a node of leaves only), `counts[k]` primitives for slot
+    /// `k` (0: unused slot), consecutive in `ids` and `out`; sets each leaf's box in `node`
+    /// and returns their union (in slot order, from [`Aabb::EMPTY`]).
+    #[inline(always)]
+    fn leaves(
+        &self,
+        ids: &[u32],
+        out: &mut [Self::Prim],
+        counts: &[u8; WIDTH],
+        node: &mut Node,
+    ) -> Option<Aabb> {
+        let mut at = 0;
+        let mut total = Aabb::EMPTY;
+        for (k, &n) in counts.iter().enumerate() {
+            let n = n as usize;
+            if n > 0 {
+                let b = self.leaf(ids.get(at..at + n)?, out.get_mut(at..at + n)?)?;
+                node.set_bounds(k, &b);
+                total = total.union(&b);
+                at += n;
+            }
+        }
+        Some(total)
     }
 }
 
@@ -248,10 +281,26 @@ impl<const IDX: usize, const TIGHT: bool> Source for TriF32<'_, IDX, TIGHT> {
         Some((f, triangle_box(&f)))
     }
 
-    /// The same operations as the default, in a loop of its own.
+    /// The same operations as the default.
     #[inline(always)]
     fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Aabb> {
-        let (lo, hi) = self.leaf_box(ids, out)?;
+        let (lo, hi) = self.one_leaf_box(ids, out)?;
+        Some(Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        })
+    }
+
+    /// The same operations as the default, in a function of its own (one call per node).
+    #[inline(always)]
+    fn leaves(
+        &self,
+        ids: &[u32],
+        out: &mut [[f32; 9]],
+        counts: &[u8; WIDTH],
+        node: &mut Node,
+    ) -> Option<Aabb> {
+        let (lo, hi) = self.leaves_box(ids, out, counts, node)?;
         Some(Aabb {
             lo: [lo[0], lo[1], lo[2]],
             hi: [hi[0], hi[1], hi[2]],
@@ -260,9 +309,51 @@ impl<const IDX: usize, const TIGHT: bool> Source for TriF32<'_, IDX, TIGHT> {
 }
 
 impl<const IDX: usize, const TIGHT: bool> TriF32<'_, IDX, TIGHT> {
+    /// [`Source::leaves`], the union as two four-lane arrays.
+    #[inline(never)]
+    fn leaves_box(
+        &self,
+        ids: &[u32],
+        out: &mut [[f32; 9]],
+        counts: &[u8; WIDTH],
+        node: &mut Node,
+    ) -> Option<([f32; 4], [f32; 4])> {
+        use crate::math::{fmax, fmin};
+        let mut at = 0;
+        let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
+        let (mut hx, mut hy, mut hz) = (f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+        for (k, &n) in counts.iter().enumerate() {
+            let n = n as usize;
+            if n > 0 {
+                let (lo, hi) = self.leaf_box(ids.get(at..at + n)?, out.get_mut(at..at + n)?)?;
+                node.lo_x[k] = lo[0];
+                node.lo_y[k] = lo[1];
+                node.lo_z[k] = lo[2];
+                node.hi_x[k] = hi[0];
+                node.hi_y[k] = hi[1];
+                node.hi_z[k] = hi[2];
+                // Aabb::union, in slot order.
+                lx = fmin(lx, lo[0]);
+                ly = fmin(ly, lo[1]);
+                lz = fmin(lz, lo[2]);
+                hx = fmax(hx, hi[0]);
+                hy = fmax(hy, hi[1]);
+                hz = fmax(hz, hi[2]);
+                at += n;
+            }
+        }
+        Some(([lx, ly, lz, 0.0], [hx, hy, hz, 0.0]))
+    }
+
+    /// [`Self::leaf_box`] in a function of its own.
+    #[inline(never)]
+    fn one_leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
+        self.leaf_box(ids, out)
+    }
+
     /// [`Source::leaf`], the box as two four-lane arrays. (Six scalars and this return type
     /// keep the compiler from vectorizing the minima into compare-and-blend sequences.)
-    #[inline(never)]
+    #[inline(always)]
     fn leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
         use crate::math::{fmax, fmin};
         let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
@@ -470,8 +561,9 @@ struct Cursor {
 impl<P: bytemuck::Pod + Send> Tree<'_, P> {
     /// Refits the whole tree; returns the root bounds (the union of the root's child boxes).
     fn refit<S: Source<Prim = P>>(self, src: &S) -> Option<Aabb> {
-        if self.nodes.is_empty() {
-            return self.prims.is_empty().then_some(Aabb::EMPTY);
+        if self.nodes.is_empty() || self.prims.is_empty() {
+            // (Both or neither, as View::parse requires.)
+            return (self.nodes.is_empty() && self.prims.is_empty()).then_some(Aabb::EMPTY);
         }
         let threads = rayon::current_num_threads();
         // Split subtrees larger than this: some 4 tasks per thread.
@@ -480,21 +572,22 @@ impl<P: bytemuck::Pod + Send> Tree<'_, P> {
         } else {
             usize::MAX
         };
-        self.subtree(src, 0, 0, split)
+        self.subtree(src, 0, 0, split, 1)
     }
 
-    /// Refits the subtree rooted at `nodes[0]`, which is global node `node_base`; its nodes
-    /// must be exactly `nodes` and its primitives exactly `prims` (from global `prim_base`).
-    /// Returns the union of the root's child boxes.
+    /// Refits the subtree rooted at `nodes[0]`, which is global node `node_base` at `depth`
+    /// (the root's is 1); its nodes must be exactly `nodes` and its primitives exactly `prims`
+    /// (from global `prim_base`). Returns the union of the root's child boxes.
     fn subtree<S: Source<Prim = P>>(
         self,
         src: &S,
         node_base: usize,
         prim_base: usize,
         split: usize,
+        depth: u32,
     ) -> Option<Aabb> {
         if self.nodes.len() > split {
-            return self.parallel(src, node_base, prim_base, split);
+            return self.parallel(src, node_base, prim_base, split, depth);
         }
         let Tree { ids, nodes, prims } = self;
         let mut at = Cursor {
@@ -515,7 +608,11 @@ impl<P: bytemuck::Pod + Send> Tree<'_, P> {
         node_base: usize,
         prim_base: usize,
         split: usize,
+        depth: u32,
     ) -> Option<Aabb> {
+        if depth > MAX_DEPTH {
+            return None;
+        }
         let Tree { ids, nodes, prims } = self;
         let (root, mut rest) = nodes.split_first_mut()?;
         let node_end = node_base + 1 + rest.len();
@@ -585,12 +682,13 @@ impl<P: bytemuck::Pod + Send> Tree<'_, P> {
             .map(|(k, t, nb, pb)| {
                 let b = if t.nodes.is_empty() {
                     // A leaf: exactly its primitives.
-                    if t.prims.len() != count[k] as usize {
+                    let n = count[k] as usize;
+                    if t.prims.len() != n || !(1..=MAX_LEAF_SIZE).contains(&n) {
                         return None;
                     }
                     src.leaf(t.ids, t.prims)?
                 } else {
-                    t.subtree(src, nb, pb, split)?
+                    t.subtree(src, nb, pb, split, depth + 1)?
                 };
                 Some((k, b))
             })
@@ -644,41 +742,73 @@ fn walk<S: Source>(
         let n = nodes.get(li)?;
         (n.child, n.count)
     };
-    let mut total = Aabb::EMPTY;
-    for k in 0..WIDTH {
-        let c = child[k];
-        if c == EMPTY_CHILD {
-            continue;
-        }
-        let b = if c & LEAF_BIT != 0 {
-            let first = (c & !LEAF_BIT) as usize;
+    if child.iter().all(|&c| c == EMPTY_CHILD || c & LEAF_BIT != 0) {
+        // A node of leaves only (most of them): one call decodes them all.
+        let start = at.prim;
+        let mut counts = [0u8; WIDTH];
+        for k in 0..WIDTH {
+            let c = child[k];
+            if c == EMPTY_CHILD {
+                continue;
+            }
             let n = count[k] as usize;
-            if first != at.prim {
+            if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
                 return None;
             }
-            let lo = first.checked_sub(prim_base)?;
-            at.prim += n;
-            src.leaf(ids.get(lo..lo + n)?, prims.get_mut(lo..lo + n)?)?
-        } else {
-            let c = c as usize;
-            if c != at.node {
-                return None;
+            counts[k] = count[k];
+            at.prim += count[k] as usize;
+        }
+        let (lo, hi) = (start.checked_sub(prim_base)?, at.prim - prim_base);
+        return src.leaves(
+            ids.get(lo..hi)?,
+            prims.get_mut(lo..hi)?,
+            &counts,
+            nodes.get_mut(li)?,
+        );
+    }
+    let mut boxes = [Aabb::EMPTY; WIDTH];
+    {
+        for k in 0..WIDTH {
+            let c = child[k];
+            if c == EMPTY_CHILD {
+                continue;
             }
-            at.node += 1;
-            walk(
-                src,
-                ids,
-                nodes,
-                prims,
-                node_base,
-                prim_base,
-                c,
-                at,
-                depth + 1,
-            )?
-        };
-        nodes[li].set_bounds(k, &b);
-        total = total.union(&b);
+            boxes[k] = if c & LEAF_BIT != 0 {
+                let first = (c & !LEAF_BIT) as usize;
+                let n = count[k] as usize;
+                if first != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
+                    return None;
+                }
+                let lo = first.checked_sub(prim_base)?;
+                at.prim += n;
+                src.leaf(ids.get(lo..lo + n)?, prims.get_mut(lo..lo + n)?)?
+            } else {
+                let c = c as usize;
+                if c != at.node {
+                    return None;
+                }
+                at.node += 1;
+                walk(
+                    src,
+                    ids,
+                    nodes,
+                    prims,
+                    node_base,
+                    prim_base,
+                    c,
+                    at,
+                    depth + 1,
+                )?
+            };
+        }
+    }
+    let node = nodes.get_mut(li)?;
+    let mut total = Aabb::EMPTY;
+    for (k, b) in boxes.iter().enumerate() {
+        if child[k] != EMPTY_CHILD {
+            node.set_bounds(k, b);
+            total = total.union(b);
+        }
     }
     Some(total)
 }
@@ -984,6 +1114,13 @@ mod tests {
         buf
     }
 
+    /// The rest of `View::parse`, as `update_one` passes it.
+    fn validate(b: &[u8]) -> Result<()> {
+        View::parse(b)
+            .map(|_| ())
+            .map_err(|reason| Error::NotBuilt { handle: 1, reason })
+    }
+
     /// Builds `before`, then updates it to `after` with `refit` on 1, 2 and 4 threads and with
     /// the general path; all must agree (bytes and result). Returns the result.
     fn check(
@@ -1042,7 +1179,7 @@ mod tests {
                 .build()
                 .unwrap();
             let (bytes, got) =
-                pool.install(|| run(&|b, h| refit(b, h, prim_kind, &readers, &[], at)));
+                pool.install(|| run(&|b, h| refit(b, h, prim_kind, &readers, &[], at, &validate)));
             assert_eq!(got, want, "{threads} threads");
             if got.is_ok() {
                 assert!(bytes == want_bytes, "bytes differ on {threads} threads");
@@ -1233,5 +1370,121 @@ mod tests {
         bad[1][24 * 2000..24 * 2000 + 4].copy_from_slice(&f32::NAN.to_le_bytes());
         let e = check(&gb, &g(&bad), &ranges(&gb), PrimKind::Aabbs).unwrap_err();
         assert!(e.contains("03664"), "{e}");
+    }
+
+    #[test]
+    fn a_corrupted_source_is_reported_as_view_parse_reports_it() {
+        let mut r = Rng(3);
+        let t = Tris::new(&mut r, 20000, 12, vk::IndexType::UINT32);
+        let geoms = [t.geometry()];
+        let ranges = tri_ranges(&[&t]);
+        let device = Device::new();
+        let blas = crate::quick::build(
+            &device,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+            &geoms,
+            &ranges,
+        )
+        .unwrap();
+        let src_buf = aligned(&device.with_bytes(blas, |b| Ok(b.to_vec())).unwrap());
+        let src: &[u8] = bytemuck::cast_slice(&src_buf);
+        let at = Location::info(0);
+        let readers = [Reader::Triangles(
+            TriangleReader::new(
+                match &geoms[0].data {
+                    GeometryData::Triangles(d) => d,
+                    _ => unreachable!(),
+                },
+                &ranges[0],
+                at.geometry(0),
+            )
+            .unwrap(),
+        )];
+        let h = *View::parse(src).unwrap().header;
+        let node = |i: usize| h.nodes_offset as usize + 256 * i;
+        let child = |i: usize, k: usize| node(i) + 192 + 4 * k;
+        let count = |i: usize, k: usize| node(i) + 224 + k;
+        // A node whose first slot holds a leaf, and one whose first slot is an inner node.
+        let nodes: &[Node] = bytemuck::cast_slice(&src[node(0)..node(h.node_count as usize)]);
+        let leaf_node = nodes
+            .iter()
+            .position(|n| n.child[0] & LEAF_BIT != 0 && n.child[0] != EMPTY_CHILD)
+            .unwrap();
+        let inner_node = nodes
+            .iter()
+            .position(|n| n.child[0] & LEAF_BIT == 0)
+            .unwrap();
+        let patches: Vec<(&str, usize, Vec<u8>)> = vec![
+            ("leaf count 0", count(leaf_node, 0), vec![0]),
+            ("leaf count 16", count(leaf_node, 0), vec![16]),
+            (
+                "leaf past the end",
+                child(leaf_node, 0),
+                (LEAF_BIT | (h.stored_count - 1)).to_le_bytes().to_vec(),
+            ),
+            (
+                "child points back",
+                child(inner_node, 0),
+                (inner_node as u32).to_le_bytes().to_vec(),
+            ),
+            (
+                "child past the end",
+                child(inner_node, 0),
+                (h.node_count).to_le_bytes().to_vec(),
+            ),
+            ("two parents", child(0, 1), 1u32.to_le_bytes().to_vec()),
+            (
+                "last node unreached",
+                child(0, 7),
+                EMPTY_CHILD.to_le_bytes().to_vec(),
+            ),
+            (
+                "id out of range",
+                h.prim_ids_offset as usize + 4 * 777,
+                h.primitive_count.to_le_bytes().to_vec(),
+            ),
+            (
+                "duplicate id",
+                h.prim_ids_offset as usize + 4 * 5,
+                6u32.to_le_bytes().to_vec(),
+            ),
+            ("no primitives", 28, 0u32.to_le_bytes().to_vec()),
+        ];
+        for (what, offset, bytes) in patches {
+            let mut bad_buf = src_buf.clone();
+            let bad = bytemuck::cast_slice_mut::<Node, u8>(&mut bad_buf);
+            bad[offset..offset + bytes.len()].copy_from_slice(&bytes);
+            let want = View::parse(bad).err();
+            let valid = ["duplicate id", "last node unreached"].contains(&what);
+            assert_eq!(want.is_none(), valid, "{what}: {want:?}");
+            for threads in [1, 4] {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                let mut buf = aligned(bad);
+                let b = &mut bytemuck::cast_slice_mut::<Node, u8>(&mut buf)[..bad.len()];
+                let got = match View::parse_sections(b) {
+                    Err(e) => Err(e),
+                    Ok(v) => {
+                        let h = *v.header;
+                        pool.install(|| {
+                            refit(b, &h, PrimKind::Triangles, &readers, &[], at, &validate)
+                        })
+                        .map_err(|e| match e {
+                            Error::NotBuilt { reason, .. } => reason,
+                            e => format!("not a structure error: {e}"),
+                        })
+                    }
+                };
+                match &want {
+                    Some(reason) => assert_eq!(got.as_ref().err(), Some(reason), "{what}"),
+                    // (Valid for View::parse, but not the encoder's layout: the general path
+                    // updates them.)
+                    None => assert!(got.is_ok(), "{what}: {got:?}"),
+                }
+            }
+        }
     }
 }

@@ -73,6 +73,16 @@ fn header_ref(bytes: &[u8]) -> Result<&Header, String> {
 
 impl<'a> View<'a> {
     pub fn parse(bytes: &'a [u8]) -> Result<View<'a>, String> {
+        let view = Self::parse_sections(bytes)?;
+        view.check_contents()?;
+        Ok(view)
+    }
+
+    /// What [`Self::parse`] checks in constant time or per geometry: the header, the sections'
+    /// bounds and order, the geometry records. A view from this alone must not be traversed:
+    /// the caller checks the rest itself (primitive ids in range, instance records, the node
+    /// tree, as [`Self::check_contents`] does), the way a refit does as it walks the tree.
+    pub fn parse_sections(bytes: &'a [u8]) -> Result<View<'a>, String> {
         let header = header_ref(bytes)?;
         let h = header;
         let prim_kind = PrimKind::from_raw(h.prim_kind)
@@ -190,6 +200,24 @@ impl<'a> View<'a> {
         if next != h.primitive_count as u64 {
             return Err("geometry primitive counts do not add up".into());
         }
+        Ok(View {
+            header,
+            prim_kind,
+            geometries,
+            nodes,
+            triangles,
+            aabbs,
+            instances,
+            prim_ids,
+        })
+    }
+
+    /// The checks of [`Self::parse`] that [`Self::parse_sections`] leaves out, which read
+    /// every instance record, primitive id and node.
+    pub fn check_contents(&self) -> Result<(), String> {
+        let (h, instances, prim_ids, nodes) =
+            (self.header, self.instances, self.prim_ids, self.nodes);
+        let stored = h.stored_count as u64;
         let identity = crate::math::Affine::IDENTITY.to_rows();
         if let Some(i) = instances.iter().position(|r| {
             r.hints & super::INSTANCE_IDENTITY != 0
@@ -237,16 +265,7 @@ impl<'a> View<'a> {
                 }
             }
         }
-        Ok(View {
-            header,
-            prim_kind,
-            geometries,
-            nodes,
-            triangles,
-            aabbs,
-            instances,
-            prim_ids,
-        })
+        Ok(())
     }
 
     /// The geometry that holds primitive sequence number `id`, and the primitive's index in it.
