@@ -399,3 +399,26 @@ pub fn fan(center: [f32; 3], k: u32, r: &mut Rand) -> GeometryDesc {
         flags: vk::GeometryFlagsKHR::empty(),
     }
 }
+
+/// A latitude/longitude sphere of radius 1: `(n + 1) x (2n + 1)` vertices, `4n^2` triangles.
+/// The benchmark examples' default scene.
+pub fn uv_sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let mut p = Vec::new();
+    let mut idx = Vec::new();
+    for i in 0..=n {
+        let th = std::f32::consts::PI * i as f32 / n as f32;
+        for j in 0..=2 * n {
+            let ph = std::f32::consts::PI * j as f32 / n as f32;
+            p.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
+        }
+    }
+    let w = 2 * n + 1;
+    for i in 0..n {
+        for j in 0..2 * n {
+            let a = i * w + j;
+            idx.push([a, a + w, a + 1]);
+            idx.push([a + 1, a + w, a + w + 1]);
+        }
+    }
+    (p, idx)
+}

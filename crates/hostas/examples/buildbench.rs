@@ -7,27 +7,6 @@
 use hostas::{AccelerationStructureCreateInfo, BuildGeometryInfo, Device, vk};
 use std::time::Instant;
 
-fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let mut p = Vec::new();
-    let mut idx = Vec::new();
-    for i in 0..=n {
-        let th = std::f32::consts::PI * i as f32 / n as f32;
-        for j in 0..=2 * n {
-            let ph = std::f32::consts::PI * j as f32 / n as f32;
-            p.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
-        }
-    }
-    let w = 2 * n + 1;
-    for i in 0..n {
-        for j in 0..2 * n {
-            let a = i * w + j;
-            idx.push([a, a + w, a + 1]);
-            idx.push([a + 1, a + w, a + w + 1]);
-        }
-    }
-    (p, idx)
-}
-
 fn soup(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     let mut seed = 0x9e37_79b9u32;
     let mut rnd = || {
@@ -60,7 +39,7 @@ fn main() {
     let (kind, n) = scene.split_once(':').unwrap_or((scene, "500"));
     let n: u32 = n.parse().expect("scene size");
     let (p, idx) = match kind {
-        "sphere" => sphere(n),
+        "sphere" => hostas_testkit::generate::uv_sphere(n),
         "soup" => soup(n),
         _ => panic!("unknown scene {kind}"),
     };

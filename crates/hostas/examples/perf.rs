@@ -4,27 +4,6 @@
 use hostas::{Device, Ray, vk};
 use std::time::Instant;
 
-fn sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let mut p = Vec::new();
-    let mut idx = Vec::new();
-    for i in 0..=n {
-        let th = std::f32::consts::PI * i as f32 / n as f32;
-        for j in 0..=2 * n {
-            let ph = std::f32::consts::PI * j as f32 / n as f32;
-            p.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
-        }
-    }
-    let w = 2 * n + 1;
-    for i in 0..n {
-        for j in 0..2 * n {
-            let a = i * w + j;
-            idx.push([a, a + w, a + 1]);
-            idx.push([a + 1, a + w, a + w + 1]);
-        }
-    }
-    (p, idx)
-}
-
 fn main() {
     let n: u32 = std::env::args()
         .nth(1)
@@ -36,7 +15,7 @@ fn main() {
         .unwrap_or(512);
     // `perf N PRESET`: build that preset only (for instruction counts with `perf stat`).
     let only: Option<String> = std::env::args().nth(2);
-    let (p, idx) = sphere(n);
+    let (p, idx) = hostas_testkit::generate::uv_sphere(n);
     let tris = idx.len() as f64;
     println!(
         "sphere: {} triangles, {} threads",

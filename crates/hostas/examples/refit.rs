@@ -45,27 +45,6 @@ fn cube_sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (pos, idx)
 }
 
-fn uv_sphere(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
-    let mut p = Vec::new();
-    let mut idx = Vec::new();
-    for i in 0..=n {
-        let th = std::f32::consts::PI * i as f32 / n as f32;
-        for j in 0..=2 * n {
-            let ph = std::f32::consts::PI * j as f32 / n as f32;
-            p.push([th.sin() * ph.cos(), th.sin() * ph.sin(), th.cos()]);
-        }
-    }
-    let w = 2 * n + 1;
-    for i in 0..n {
-        for j in 0..2 * n {
-            let a = i * w + j;
-            idx.push([a, a + w, a + 1]);
-            idx.push([a + 1, a + w, a + w + 1]);
-        }
-    }
-    (p, idx)
-}
-
 struct Rng(u64);
 impl Rng {
     fn f32(&mut self) -> f32 {
@@ -140,7 +119,7 @@ fn main() {
     let (p, idx) = match scene.as_str() {
         "sphere" => cube_sphere(289),
         "soup" => soup(1_000_000),
-        "uv" => uv_sphere(500),
+        "uv" => hostas_testkit::generate::uv_sphere(500),
         path => obj(path),
     };
     let flags = match std::env::var("REFIT_FLAGS").as_deref() {
