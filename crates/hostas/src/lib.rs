@@ -43,7 +43,7 @@ pub use input::{
     TrianglesData,
 };
 pub use math::{Aabb, Affine};
-pub use memory::Buffer;
+pub use memory::{Buffer, HostMemory};
 pub use traverse::{
     CandidateType, CommittedType, Hit, HitKind, Intersection, Ray, RayFlags, RayQuery, Scene,
     Tracer,

@@ -15,31 +15,74 @@ use std::sync::atomic::{AtomicU64, Ordering};
 #[repr(C, align(64))]
 pub(crate) struct Block([u8; 64]);
 
-/// Bound host memory.
+/// Regions at least this large are mapped from the OS and advised to use huge pages.
+const MAPPED_MIN: usize = 2 << 20;
+
+/// Where the bytes of a [`HostMemory`] live.
+enum Pages {
+    /// Small regions: the allocator's (64-byte aligned) memory.
+    Heap(Box<[Block]>),
+    /// Large regions: an anonymous mapping (page aligned, zero filled by the OS), with a
+    /// transparent-huge-page hint on Linux. A structure over a million triangles spans about
+    /// 50 MB; with 4 KiB pages, incoherent rays, refits and builds miss the TLB on nearly
+    /// every node (measured on the 1M sphere: +30% build, +45% trace with huge pages).
+    /// Embree advises its large allocations the same way.
+    Mapped(memmap2::MmapMut),
+}
+
+/// Zeroed host memory: what a buffer is bound to, and what the convenience calls and
+/// benchmarks use for scratch ([`HostMemory::zeroed`]).
 pub struct HostMemory {
-    blocks: Box<[Block]>,
+    pages: Pages,
     len: usize,
 }
 
 /// A 64-byte aligned copy of `bytes` (for validating untrusted data as typed sections).
-pub(crate) fn aligned_copy(bytes: &[u8]) -> Vec<Block> {
-    let mut blocks = bytemuck::allocation::zeroed_vec::<Block>(bytes.len().div_ceil(64));
-    bytemuck::cast_slice_mut::<Block, u8>(&mut blocks)[..bytes.len()].copy_from_slice(bytes);
-    blocks
+pub(crate) fn aligned_copy(bytes: &[u8]) -> Result<HostMemory> {
+    let mut m = HostMemory::zeroed(bytes.len())?;
+    m.bytes_mut().copy_from_slice(bytes);
+    Ok(m)
 }
 
 impl HostMemory {
-    fn new(len: usize) -> Result<HostMemory> {
-        // Zeroed by the allocator (fresh pages from the OS are zero already), not by a memset.
-        let blocks = bytemuck::allocation::try_zeroed_slice_box::<Block>(len.div_ceil(64))
-            .map_err(|()| Error::OutOfHostMemory(format!("{len} bytes could not be allocated")))?;
-        Ok(HostMemory { blocks, len })
+    /// `len` zero bytes, at least 64-byte aligned.
+    pub fn zeroed(len: usize) -> Result<HostMemory> {
+        let oom = || Error::OutOfHostMemory(format!("{len} bytes could not be allocated"));
+        let pages = if len >= MAPPED_MIN {
+            let map = memmap2::MmapMut::map_anon(len).map_err(|_| oom())?;
+            #[cfg(target_os = "linux")]
+            {
+                // Only a hint: where the kernel has no huge pages it keeps small ones.
+                let _ = map.advise(memmap2::Advice::HugePage);
+            }
+            Pages::Mapped(map)
+        } else {
+            // Zeroed by the allocator (fresh pages from the OS are zero already), not by a
+            // memset.
+            Pages::Heap(
+                bytemuck::allocation::try_zeroed_slice_box::<Block>(len.div_ceil(64))
+                    .map_err(|()| oom())?,
+            )
+        };
+        Ok(HostMemory { pages, len })
+    }
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
     }
     pub fn bytes(&self) -> &[u8] {
-        &bytemuck::cast_slice(&self.blocks)[..self.len]
+        match &self.pages {
+            Pages::Heap(b) => &bytemuck::cast_slice(b)[..self.len],
+            Pages::Mapped(m) => &m[..self.len],
+        }
     }
     pub fn bytes_mut(&mut self) -> &mut [u8] {
-        &mut bytemuck::cast_slice_mut(&mut self.blocks)[..self.len]
+        match &mut self.pages {
+            Pages::Heap(b) => &mut bytemuck::cast_slice_mut(b)[..self.len],
+            Pages::Mapped(m) => &mut m[..self.len],
+        }
     }
 }
 
@@ -98,7 +141,7 @@ impl Buffer {
         }
         let len = usize::try_from(self.inner.size)
             .map_err(|_| Error::OutOfHostMemory(format!("{} bytes", self.inner.size)))?;
-        *m = Some(Arc::new(RwLock::new(HostMemory::new(len)?)));
+        *m = Some(Arc::new(RwLock::new(HostMemory::zeroed(len)?)));
         Ok(())
     }
     pub fn size(&self) -> u64 {
@@ -147,5 +190,34 @@ impl Buffer {
         })?;
         guard.bytes_mut()[r].copy_from_slice(data);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn small_and_mapped_memory_are_zeroed_aligned_and_writable() {
+        for len in [
+            0,
+            1,
+            4096 + 3,
+            MAPPED_MIN - 1,
+            MAPPED_MIN,
+            3 * MAPPED_MIN + 5,
+        ] {
+            let mut m = HostMemory::zeroed(len).unwrap();
+            assert_eq!(m.len(), len);
+            assert_eq!(m.bytes().len(), len);
+            assert!(m.bytes().iter().all(|&b| b == 0), "len {len}");
+            assert_eq!(m.bytes().as_ptr() as usize % 64, 0, "len {len}");
+            if len > 0 {
+                m.bytes_mut()[len - 1] = 7;
+                assert_eq!(m.bytes()[len - 1], 7);
+            }
+            let copy = aligned_copy(m.bytes()).unwrap();
+            assert_eq!(copy.bytes(), m.bytes());
+        }
     }
 }

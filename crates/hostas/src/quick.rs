@@ -8,6 +8,7 @@ use crate::input::{
     AabbsData, BuildGeometryInfo, BuildRangeInfo, Geometry, InstancesData, TrianglesData,
 };
 use crate::math::{Aabb, Affine};
+use crate::memory::HostMemory;
 use ash::vk;
 
 /// Sizes, creates and builds one structure from `geometries` (one range per geometry).
@@ -33,8 +34,8 @@ pub fn build(
         ty,
         sizes.acceleration_structure_size,
     ))?;
-    let mut scratch = vec![0u8; sizes.build_scratch_size as usize];
-    let info = BuildGeometryInfo::build(ty, flags, geometries, dst, &mut scratch);
+    let mut scratch = HostMemory::zeroed(sizes.build_scratch_size as usize)?;
+    let info = BuildGeometryInfo::build(ty, flags, geometries, dst, scratch.bytes_mut());
     match device.build_acceleration_structures(&mut [info], &[ranges]) {
         Ok(()) => Ok(dst),
         Err(e) => {

@@ -146,8 +146,8 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// A BLAS of `mesh` with memory and scratch allocated once, for repeated builds.
 struct Target {
     dst: AccelerationStructure,
-    scratch: Vec<u8>,
-    update_scratch: Vec<u8>,
+    scratch: hostas::HostMemory,
+    update_scratch: hostas::HostMemory,
     size: u64,
 }
 
@@ -181,8 +181,10 @@ fn target(device: &Device, m: &Mesh, flags: F) -> Result<Target> {
         .map_err(|e| anyhow!("{e}"))?;
     Ok(Target {
         dst,
-        scratch: vec![0; sizes.build_scratch_size as usize],
-        update_scratch: vec![0; sizes.update_scratch_size.max(1) as usize],
+        scratch: hostas::HostMemory::zeroed(sizes.build_scratch_size as usize)
+            .map_err(|e| anyhow!("{e}"))?,
+        update_scratch: hostas::HostMemory::zeroed(sizes.update_scratch_size.max(1) as usize)
+            .map_err(|e| anyhow!("{e}"))?,
         size: sizes.acceleration_structure_size,
     })
 }
@@ -217,9 +219,9 @@ fn build_into(
         dst: Some(t.dst),
         geometries: &geoms,
         scratch: Some(if update {
-            &mut t.update_scratch
+            t.update_scratch.bytes_mut()
         } else {
-            &mut t.scratch
+            t.scratch.bytes_mut()
         }),
     };
     let start = Instant::now();

@@ -302,7 +302,7 @@ impl Device {
         };
         let payload = &src[start as usize..payload_end as usize];
         // Validate a copy with the alignment the typed view needs.
-        let staged = crate::memory::aligned_copy(payload);
+        let staged = crate::memory::aligned_copy(payload)?;
         let check = |b: &[u8]| -> Result<(Header, PrimKind)> {
             let v = View::parse(b).map_err(|reason| {
                 Error::vuid(
@@ -336,7 +336,7 @@ impl Device {
             }
             Ok((*v.header, v.prim_kind))
         };
-        let (h, prim_kind) = check(&bytemuck::cast_slice::<_, u8>(&staged)[..payload.len()])?;
+        let (h, prim_kind) = check(staged.bytes())?;
         let dst_obj = self.object(dst)?;
         let ty_ok = dst_obj.ty == vk::AccelerationStructureTypeKHR::GENERIC
             || (dst_obj.ty == vk::AccelerationStructureTypeKHR::TOP_LEVEL)
