@@ -118,10 +118,13 @@ impl ShearedRay {
         let u = cx * by - cy * bx;
         let v = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
-        if u == 0.0 || v == 0.0 || w == 0.0 {
+        // Bitwise, not short-circuit: one branch per outcome instead of one per comparison
+        // (whether a ray covers a triangle is data-dependent; mispredictions cost more than
+        // the extra comparisons).
+        if (u == 0.0) | (v == 0.0) | (w == 0.0) {
             return self.on_edge(&s);
         }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        if ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0)) {
             return None;
         }
         self.hit(&s, u, v, w)
