@@ -353,8 +353,9 @@ fn text(info: &FileInfo) -> String {
                 &mut s,
                 "nodes",
                 format!(
-                    "{} (4-wide), {} leaves",
+                    "{} ({}-wide), {} leaves",
                     thousands(t.nodes as u64),
+                    hostas::layout::WIDTH,
                     thousands(t.leaves as u64)
                 ),
             );
