@@ -110,7 +110,8 @@ impl<'s> Tracer<'s> {
         };
         let world = BoxRay::new(ray.origin, ray.direction);
         let mut world_sheared: Option<ShearedRay> = None;
-        let mut stack = std::mem::take(&mut self.stack);
+        // Disjoint borrows of the tracer's parts (the stack is borrowed for the whole trace).
+        let stack = &mut self.stack[..];
         let mut sp = 0;
         let mut cur = Entry {
             child: 0,
@@ -120,7 +121,7 @@ impl<'s> Tracer<'s> {
         'top: loop {
             if cur.child & LEAF_BIT == 0 {
                 if let Some(next) = descend(
-                    &mut stack, &mut sp, tlas.nodes, cur.child, &world, ray.t_min, best.t,
+                    stack, &mut sp, tlas.nodes, cur.child, &world, ray.t_min, best.t,
                 ) {
                     cur = next;
                     continue;
@@ -170,36 +171,23 @@ impl<'s> Tracer<'s> {
                         blas: bi,
                     };
                     let found = match local.1.perm {
-                        0 => {
-                            trace_blas::<0>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
-                        }
-                        1 => {
-                            trace_blas::<1>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
-                        }
-                        2 => {
-                            trace_blas::<2>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
-                        }
-                        3 => {
-                            trace_blas::<3>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
-                        }
-                        4 => {
-                            trace_blas::<4>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
-                        }
-                        _ => {
-                            trace_blas::<5>(&mut stack, sp, &at, &local, ray, &mut best, first_hit)
-                        }
+                        0 => trace_blas::<0>(stack, sp, &at, &local, ray, &mut best, first_hit),
+                        1 => trace_blas::<1>(stack, sp, &at, &local, ray, &mut best, first_hit),
+                        2 => trace_blas::<2>(stack, sp, &at, &local, ray, &mut best, first_hit),
+                        3 => trace_blas::<3>(stack, sp, &at, &local, ray, &mut best, first_hit),
+                        4 => trace_blas::<4>(stack, sp, &at, &local, ray, &mut best, first_hit),
+                        _ => trace_blas::<5>(stack, sp, &at, &local, ray, &mut best, first_hit),
                     };
                     if found && first_hit {
                         break 'top;
                     }
                 }
             }
-            match pop(&stack, &mut sp, 0, best.t) {
+            match pop(stack, &mut sp, 0, best.t) {
                 Some(e) => cur = e,
                 None => break,
             }
         }
-        self.stack = stack;
         if best.kind == HitKind::Miss {
             return Ok(Hit::MISS);
         }
