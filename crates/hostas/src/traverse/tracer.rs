@@ -235,18 +235,31 @@ fn descend(
             t: t[k],
         });
     }
+    let entry = |k: usize| Entry {
+        child: node.child[k],
+        count: node.count[k] as u32,
+        t: t[k],
+    };
+    let start = *sp;
+    // Two children (the most common case after one): the farther is pushed, the nearer
+    // returned, in the order the insertion sort below would give (on a tie, the later lane
+    // is nearer), without its loops.
+    let rest = mask & (mask - 1);
+    if rest & (rest - 1) == 0 {
+        let e0 = entry(mask.trailing_zeros() as usize);
+        let e1 = entry(rest.trailing_zeros() as usize);
+        let (far, near) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
+        *stack.get_mut(start)? = far;
+        *sp = start + 1;
+        return Some(near);
+    }
     // Insertion-sort the hit children straight onto the stack, farthest deepest; the
     // nearest ends on top and is returned instead of pushed.
-    let start = *sp;
     let mut end = start;
     while mask != 0 {
         let k = mask.trailing_zeros() as usize;
         mask &= mask - 1;
-        let e = Entry {
-            child: node.child[k],
-            count: node.count[k] as u32,
-            t: t[k],
-        };
+        let e = entry(k);
         // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
         let Some(region) = stack.get_mut(start..=end) else {
             break;
