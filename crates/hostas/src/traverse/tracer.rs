@@ -253,6 +253,22 @@ fn descend(
         *sp = start + 1;
         return Some(near);
     }
+    // Three children: the same order by a three-comparison network.
+    let rest2 = rest & (rest - 1);
+    if rest2 & (rest2 - 1) == 0 {
+        let e0 = entry(mask.trailing_zeros() as usize);
+        let e1 = entry(rest.trailing_zeros() as usize);
+        let e2 = entry(rest2.trailing_zeros() as usize);
+        // Deepest first; an entry goes below an earlier one only when strictly farther.
+        let (a, b) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
+        let (b, c) = if b.t < e2.t { (e2, b) } else { (b, e2) };
+        let (a, b) = if a.t < b.t { (b, a) } else { (a, b) };
+        let region = stack.get_mut(start..start + 2)?;
+        region[0] = a;
+        region[1] = b;
+        *sp = start + 2;
+        return Some(c);
+    }
     // Insertion-sort the hit children straight onto the stack, farthest deepest; the
     // nearest ends on top and is returned instead of pushed.
     let mut end = start;
