@@ -342,6 +342,45 @@ fn coincident_primitives() {
                 [0.0, 0.0, -1.0],
             );
             check_candidates(&scene, &oracle, &ray, &preset).unwrap();
+            // Every node box and every hit ties here: the batch tracer must visit children
+            // in exactly the ray query's order to report the same one of the 3000.
+            check_closest(&scene, &oracle, &ray, &preset).unwrap();
+            let slanted = Ray::new(
+                [r.gen_range(0.0..0.5), r.gen_range(0.0..0.5), 1.0],
+                [r.gen_range(-0.2..0.2), r.gen_range(-0.2..0.2), -1.0],
+            );
+            check_closest(&scene, &oracle, &slanted, &preset).unwrap();
+        }
+    }
+}
+
+/// Two and three copies of one grid (as separate geometries): every hit ties with its copies,
+/// and the copies' boxes tie, so nodes have two or three hit children at the same distance.
+/// Which copy is reported depends only on the order children are visited in, which the batch
+/// tracer must share with the ray query.
+#[test]
+fn duplicated_grids_tie_in_the_same_order() {
+    let mut r = generate::rng(11);
+    let device = Device::new();
+    for copies in [2, 3] {
+        let desc = SceneDesc {
+            blases: vec![hostas_testkit::BlasDesc {
+                geometries: (0..copies).map(|_| generate::grid(12, None)).collect(),
+            }],
+            instances: vec![hostas_testkit::InstanceDesc::identity(0)],
+        };
+        CURRENT.with(|c| *c.borrow_mut() = vec![(0, 0)]);
+        let oracle = Oracle::new(&desc);
+        for preset in PRESETS {
+            let built = desc.build(&device, preset, preset).unwrap();
+            let scene = device.scene(built.tlas).unwrap();
+            for _ in 0..200 {
+                let ray = Ray::new(
+                    [r.gen_range(0.0..12.0), r.gen_range(0.0..12.0), 1.0],
+                    [r.gen_range(-0.3..0.3), r.gen_range(-0.3..0.3), -1.0],
+                );
+                check_closest(&scene, &oracle, &ray, &preset).unwrap();
+            }
         }
     }
 }
