@@ -356,8 +356,9 @@ fn coincident_primitives() {
 
 /// Two and three copies of one grid (as separate geometries): every hit ties with its copies,
 /// and the copies' boxes tie, so nodes have two or three hit children at the same distance.
-/// Which copy is reported depends only on the order children are visited in, which the batch
-/// tracer must share with the ray query.
+/// Which copy is reported depends only on the order children are visited in: the batch
+/// tracer and the ray query must report the same one (they share `query::descend`; this
+/// failed when the tracer had its own ordering with the tie rule flipped).
 #[test]
 fn duplicated_grids_tie_in_the_same_order() {
     let mut r = generate::rng(11);

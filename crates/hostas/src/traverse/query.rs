@@ -291,55 +291,110 @@ impl<'s> Level<'s> {
                 self.leaf_end = self.leaf_next + e.count;
                 return true;
             }
-            let nodes = self.view.nodes;
-            let Some(node) = nodes.get(e.child as usize) else {
-                continue;
-            };
-            let (mask, t) = self.ray.node(node, t_min, t_max);
-            push_hit_children(node, mask, &t, |e| self.stack.push(e));
+            // The batch tracer's ordering (farthest deepest), with the nearest pushed too.
+            let stack = &mut *self.stack;
+            let mut sp = stack.len;
+            let nearest = descend(
+                &mut stack.items,
+                &mut sp,
+                self.view.nodes,
+                e.child,
+                &self.ray,
+                t_min,
+                t_max,
+            );
+            stack.len = sp;
+            if let Some(n) = nearest {
+                stack.push(n);
+            }
         }
         false
     }
 }
 
-/// Hands `push` the children of `node` in `mask` (from [`BoxRay::node`], with their entry
-/// distances `t`), farthest first, so that the nearest is popped next.
+/// Tests the children of node `index`: returns the nearest one the segment reaches, having
+/// pushed the others (farthest deepest), or `None` when it reaches none.
 #[inline(always)]
-pub(super) fn push_hit_children(
-    node: &Node,
-    mut mask: u32,
-    t: &[f32; WIDTH],
-    mut push: impl FnMut(Entry),
-) {
+pub(super) fn descend(
+    stack: &mut [Entry],
+    sp: &mut usize,
+    nodes: &[Node],
+    index: u32,
+    ray: &BoxRay,
+    t_min: f32,
+    t_max: f32,
+) -> Option<Entry> {
+    let node = nodes.get(index as usize)?;
+    let (mut mask, t) = ray.node(node, t_min, t_max);
+    if mask == 0 {
+        return None;
+    }
+    if mask & (mask - 1) == 0 {
+        let k = mask.trailing_zeros() as usize;
+        return Some(Entry {
+            child: node.child[k],
+            count: node.count[k] as u32,
+            t: t[k],
+        });
+    }
     let entry = |k: usize| Entry {
         child: node.child[k],
         count: node.count[k] as u32,
         t: t[k],
     };
-    if mask & mask.wrapping_sub(1) == 0 {
-        // None or one: no ordering to do.
-        if mask != 0 {
-            push(entry(mask.trailing_zeros() as usize));
-        }
-        return;
+    let start = *sp;
+    // Two children (the most common case after one): the farther is pushed, the nearer
+    // returned, in the order the insertion sort below would give (on a tie, the later lane
+    // is nearer), without its loops.
+    let rest = mask & (mask - 1);
+    if rest & (rest - 1) == 0 {
+        let e0 = entry(mask.trailing_zeros() as usize);
+        let e1 = entry(rest.trailing_zeros() as usize);
+        let (far, near) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
+        *stack.get_mut(start)? = far;
+        *sp = start + 1;
+        return Some(near);
     }
-    // Insertion into `hits`, kept in decreasing distance.
-    let mut hits = [Entry::default(); WIDTH];
-    let mut n = 0;
+    // Three children: the same order by a three-comparison network.
+    let rest2 = rest & (rest - 1);
+    if rest2 & (rest2 - 1) == 0 {
+        let e0 = entry(mask.trailing_zeros() as usize);
+        let e1 = entry(rest.trailing_zeros() as usize);
+        let e2 = entry(rest2.trailing_zeros() as usize);
+        // Deepest first; an entry goes below an earlier one only when strictly farther.
+        let (a, b) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
+        let (b, c) = if b.t < e2.t { (e2, b) } else { (b, e2) };
+        let (a, b) = if a.t < b.t { (b, a) } else { (a, b) };
+        let region = stack.get_mut(start..start + 2)?;
+        region[0] = a;
+        region[1] = b;
+        *sp = start + 2;
+        return Some(c);
+    }
+    // Insertion-sort the hit children straight onto the stack, farthest deepest; the
+    // nearest ends on top and is returned instead of pushed.
+    let mut end = start;
     while mask != 0 {
-        let e = entry(mask.trailing_zeros() as usize);
+        let k = mask.trailing_zeros() as usize;
         mask &= mask - 1;
-        let mut j = n;
-        while j > 0 && hits[j - 1].t < e.t {
-            hits[j] = hits[j - 1];
+        let e = entry(k);
+        // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
+        let Some(region) = stack.get_mut(start..=end) else {
+            break;
+        };
+        let mut j = region.len() - 1;
+        while j > 0 && region[j - 1].t < e.t {
+            region[j] = region[j - 1];
             j -= 1;
         }
-        hits[j] = e;
-        n += 1;
+        region[j] = e;
+        end += 1;
     }
-    for e in &hits[..n] {
-        push(*e);
+    if end == start {
+        return None;
     }
+    *sp = end - 1;
+    stack.get(*sp).copied()
 }
 
 struct Bottom<'s> {

@@ -7,7 +7,7 @@
 //! candidates are not materialized, and the ids of the hit are looked up once at the end.
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
-use super::query::{BoxRay, Entry, STACK_CAPACITY, opacity_culled, resolve_opacity};
+use super::query::{BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, resolve_opacity};
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
@@ -208,91 +208,6 @@ impl<'s> Tracer<'s> {
             front_face: best.front_face,
         })
     }
-}
-
-/// Tests the children of node `index`: returns the nearest one the segment reaches, having
-/// pushed the others (farthest deepest), or `None` when it reaches none.
-#[inline(always)]
-fn descend(
-    stack: &mut [Entry],
-    sp: &mut usize,
-    nodes: &[crate::layout::Node],
-    index: u32,
-    ray: &BoxRay,
-    t_min: f32,
-    t_max: f32,
-) -> Option<Entry> {
-    let node = nodes.get(index as usize)?;
-    let (mut mask, t) = ray.node(node, t_min, t_max);
-    if mask == 0 {
-        return None;
-    }
-    if mask & (mask - 1) == 0 {
-        let k = mask.trailing_zeros() as usize;
-        return Some(Entry {
-            child: node.child[k],
-            count: node.count[k] as u32,
-            t: t[k],
-        });
-    }
-    let entry = |k: usize| Entry {
-        child: node.child[k],
-        count: node.count[k] as u32,
-        t: t[k],
-    };
-    let start = *sp;
-    // Two children (the most common case after one): the farther is pushed, the nearer
-    // returned, in the order the insertion sort below would give (on a tie, the later lane
-    // is nearer), without its loops.
-    let rest = mask & (mask - 1);
-    if rest & (rest - 1) == 0 {
-        let e0 = entry(mask.trailing_zeros() as usize);
-        let e1 = entry(rest.trailing_zeros() as usize);
-        let (far, near) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
-        *stack.get_mut(start)? = far;
-        *sp = start + 1;
-        return Some(near);
-    }
-    // Three children: the same order by a three-comparison network.
-    let rest2 = rest & (rest - 1);
-    if rest2 & (rest2 - 1) == 0 {
-        let e0 = entry(mask.trailing_zeros() as usize);
-        let e1 = entry(rest.trailing_zeros() as usize);
-        let e2 = entry(rest2.trailing_zeros() as usize);
-        // Deepest first; an entry goes below an earlier one only when strictly farther.
-        let (a, b) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
-        let (b, c) = if b.t < e2.t { (e2, b) } else { (b, e2) };
-        let (a, b) = if a.t < b.t { (b, a) } else { (a, b) };
-        let region = stack.get_mut(start..start + 2)?;
-        region[0] = a;
-        region[1] = b;
-        *sp = start + 2;
-        return Some(c);
-    }
-    // Insertion-sort the hit children straight onto the stack, farthest deepest; the
-    // nearest ends on top and is returned instead of pushed.
-    let mut end = start;
-    while mask != 0 {
-        let k = mask.trailing_zeros() as usize;
-        mask &= mask - 1;
-        let e = entry(k);
-        // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
-        let Some(region) = stack.get_mut(start..=end) else {
-            break;
-        };
-        let mut j = region.len() - 1;
-        while j > 0 && region[j - 1].t < e.t {
-            region[j] = region[j - 1];
-            j -= 1;
-        }
-        region[j] = e;
-        end += 1;
-    }
-    if end == start {
-        return None;
-    }
-    *sp = end - 1;
-    stack.get(*sp).copied()
 }
 
 /// Pops the nearest entry above `base` that may still hold a hit nearer than `t_max`.
