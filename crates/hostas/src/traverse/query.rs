@@ -162,6 +162,10 @@ pub(super) const ROBUST_FAR: f32 =
 pub(super) struct BoxRay {
     origin: Vec3,
     inv: Vec3,
+    /// `inv * ROBUST_FAR`: the far distances' widening folded into the inverse (as many
+    /// roundings as widening the product, so the same bound; three multiplications fewer per
+    /// node).
+    inv_far: Vec3,
     /// Per axis: the ray goes towards smaller values, so a box's near plane is its max.
     neg: [bool; 3],
 }
@@ -175,6 +179,7 @@ impl BoxRay {
         BoxRay {
             origin,
             inv,
+            inv_far: inv.map(|i| i * ROBUST_FAR),
             neg: [
                 inv[0].is_sign_negative(),
                 inv[1].is_sign_negative(),
@@ -205,6 +210,7 @@ impl BoxRay {
         };
         let [ox, oy, oz] = self.origin;
         let [ix, iy, iz] = self.inv;
+        let [jx, jy, jz] = self.inv_far;
         let mut near = [0.0; WIDTH];
         let mut hit = [false; WIDTH];
         for k in 0..WIDTH {
@@ -215,11 +221,8 @@ impl BoxRay {
                 fmax((ny[k] - oy) * iy, fmax((nz[k] - oz) * iz, t_min)),
             );
             let far = fmin(
-                (fx[k] - ox) * ix * ROBUST_FAR,
-                fmin(
-                    (fy[k] - oy) * iy * ROBUST_FAR,
-                    fmin((fz[k] - oz) * iz * ROBUST_FAR, t_max),
-                ),
+                (fx[k] - ox) * jx,
+                fmin((fy[k] - oy) * jy, fmin((fz[k] - oz) * jz, t_max)),
             );
             // A ray parallel to a slab it is outside of enters at +inf: a miss.
             hit[k] = near[k] <= far && near[k] < f32::INFINITY;
