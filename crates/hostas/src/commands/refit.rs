@@ -174,10 +174,13 @@ impl Grow {
     #[inline(always)]
     fn triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
         use crate::math::{fmax, fmin};
-        for k in 0..3 {
-            self.lo[k] = fmin(self.lo[k], fmin(fmin(a[k], b[k]), c[k]));
-            self.hi[k] = fmax(self.hi[k], fmax(fmax(a[k], b[k]), c[k]));
-        }
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
+        lo[0] = fmin(lo[0], fmin(fmin(a[0], b[0]), c[0]));
+        lo[1] = fmin(lo[1], fmin(fmin(a[1], b[1]), c[1]));
+        lo[2] = fmin(lo[2], fmin(fmin(a[2], b[2]), c[2]));
+        hi[0] = fmax(hi[0], fmax(fmax(a[0], b[0]), c[0]));
+        hi[1] = fmax(hi[1], fmax(fmax(a[1], b[1]), c[1]));
+        hi[2] = fmax(hi[2], fmax(fmax(a[2], b[2]), c[2]));
     }
 
     #[inline(always)]
@@ -309,8 +312,14 @@ impl<const N: usize> IndexRecords<'_, N> {
 
 /// A triangle geometry's `R32G32B32_SFLOAT` vertices 0 to maxVertex.
 trait Vertices: Sync + Copy {
+    /// Vertex `v`; `None` past maxVertex.
+    fn get(&self, v: usize) -> Option<[f32; 3]>;
+
     /// Vertex `v`; NaNs past maxVertex.
-    fn vertex(&self, v: usize) -> [f32; 3];
+    #[inline(always)]
+    fn vertex(&self, v: usize) -> [f32; 3] {
+        self.get(v).unwrap_or([f32::NAN; 3])
+    }
 }
 
 /// Tightly packed (stride 12): exactly maxVertex + 1 records.
@@ -333,22 +342,21 @@ fn vec3(b: &[u8; 12]) -> [f32; 3] {
 
 impl Vertices for Packed<'_> {
     #[inline(always)]
-    fn vertex(&self, v: usize) -> [f32; 3] {
-        match self.0.get(v) {
-            Some(b) => vec3(b),
-            None => [f32::NAN; 3],
-        }
+    fn get(&self, v: usize) -> Option<[f32; 3]> {
+        self.0.get(v).map(vec3)
     }
 }
 
 impl Vertices for Strided<'_> {
     #[inline(always)]
-    fn vertex(&self, v: usize) -> [f32; 3] {
-        let at = v.wrapping_mul(self.stride);
-        match self.data.get(at..at.wrapping_add(12)) {
-            Some(b) if v <= self.last => vec3(b.try_into().unwrap_or(&[0xff; 12])),
-            _ => [f32::NAN; 3],
+    fn get(&self, v: usize) -> Option<[f32; 3]> {
+        if v > self.last {
+            return None;
         }
+        let at = v.wrapping_mul(self.stride);
+        Some(vec3(
+            self.data.get(at..at.wrapping_add(12))?.try_into().ok()?,
+        ))
     }
 }
 
@@ -679,17 +687,21 @@ fn in_primitive_order<I: Indices, V: Vertices>(
     }
     // Distinct ids fill as many slots as there are ids.
     let mut written = 0;
-    let mut ok = true;
+    let mut active = true;
+    // (A copy, so that the compiler keeps the fields in registers.)
+    let d = *d;
     let fv = d.first_vertex;
     for (&s, t) in slot.iter().zip(d.index.triples()) {
         if s != NONE {
-            let (f, active) = d.triangle(&[t[0] + fv, t[1] + fv, t[2] + fv]);
-            ok &= active;
-            *prims.get_mut(s as usize)? = f;
+            let a = d.verts.get(t[0] + fv)?;
+            let b = d.verts.get(t[1] + fv)?;
+            let c = d.verts.get(t[2] + fv)?;
+            active &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
+            *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
             written += 1;
         }
     }
-    (ok && written == ids.len()).then_some(())
+    (active && written == ids.len()).then_some(())
 }
 
 /// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
