@@ -5,13 +5,16 @@
 //! The fast path walks the tree depth-first in one pass: each leaf decodes its primitives
 //! straight from the application's bytes into the stored primitive section while computing
 //! the leaf's box, and each node's boxes are set once its children are done; large subtrees
-//! run in parallel. It relies on the layout the encoder writes (nodes in depth-first preorder,
-//! primitives in leaf order) and checks it as it goes. Anything it does not expect (an
-//! invalid primitive, an unusual layout) makes it give up, and the general path below redoes
-//! the whole update from the start: it reports the first error in stored order, exactly as
-//! before, and handles any layout [`View::parse`](crate::layout::view::View::parse) accepts.
-//! Both paths compute every box with the same operations in the same order, so the bytes
-//! written do not depend on the path taken or the thread count.
+//! run in parallel. For one triangle geometry on one thread (and for scattered ones on a few)
+//! the stored triangles are instead rewritten in primitive order first, reading the
+//! application's buffers in sequence, and the walk then only computes the boxes. It relies on
+//! the layout the encoder writes (nodes in depth-first preorder, primitives in leaf order) and
+//! checks it as it goes. Anything it does not expect (an invalid primitive, an unusual layout)
+//! makes it give up, and the general path below redoes the whole update from the start: it
+//! reports the first error in stored order, exactly as before, and handles any layout
+//! [`View::parse`](crate::layout::view::View::parse) accepts. Both paths compute every box
+//! with the same operations in the same order, so the bytes written do not depend on the path
+//! taken or the thread count.
 
 use super::build::Reader;
 use crate::error::{Error, Location, Result};
