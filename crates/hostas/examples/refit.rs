@@ -1,11 +1,13 @@
 //! Refit (UPDATE, src == dst) speed on one scene, for A/B comparisons of the update path.
 //!
 //! `refit SCENE [REPS]` with SCENE one of `sphere` (1M-triangle cube-sphere), `soup` (1M random
-//! triangles, indexed, vertices in triangle order), `uv` (the `perf` example's sphere) or a
-//! path to an OBJ file (`v` and `f` lines). Builds once with ALLOW_UPDATE (default preset, or
+//! triangles, indexed, vertices in triangle order), `boxes` (1M triangles: 83k randomly rotated
+//! boxes), `uv` (the `perf` example's sphere), or a path to an OBJ file (`v` and `f` lines) or
+//! a binary PLY (float vertices, face lists). Builds once with ALLOW_UPDATE (default preset, or
 //! `REFIT_FLAGS=fast-trace|fast-build|low-memory`), then times REPS updates, alternating
-//! between moved and original vertices, and prints the median. With REPS = 0 it only builds
-//! (to subtract the build's instruction count under `perf stat`).
+//! between moved and original vertices, and prints the median wall time and the mean of the
+//! calling thread's CPU time (which leaves out waiting for a core). With REPS = 0 it only builds (to
+//! subtract the build's instruction count under `perf stat`).
 
 use hostas::{Device, vk};
 use std::time::Instant;
@@ -70,6 +72,66 @@ fn soup(count: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (pos, idx)
 }
 
+/// `count` randomly rotated boxes (12 triangles, 8 shared vertices each; sides 0.05-5, centres
+/// in [0,100]^3), as the peer benchmark's `boxes` scene.
+fn boxes(count: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    const FACES: [[u32; 3]; 12] = [
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
+    ];
+    let mut rng = Rng(0xB0C5);
+    let mut pos = Vec::with_capacity(count * 8);
+    let mut idx = Vec::with_capacity(count * 12);
+    for _ in 0..count {
+        let c = [0; 3].map(|_| rng.f32() * 100.0);
+        let h = [0; 3].map(|_| 0.5 * (0.05f32.ln() + rng.f32() * (100.0f32).ln()).exp());
+        // A random rotation (Shoemake's quaternion method).
+        let (u1, u2, u3) = (
+            rng.f32(),
+            rng.f32() * std::f32::consts::TAU,
+            rng.f32() * std::f32::consts::TAU,
+        );
+        let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+        let (x, y, z, w) = (a * u2.sin(), a * u2.cos(), b * u3.sin(), b * u3.cos());
+        let m = [
+            [
+                1.0 - 2.0 * (y * y + z * z),
+                2.0 * (x * y - z * w),
+                2.0 * (x * z + y * w),
+            ],
+            [
+                2.0 * (x * y + z * w),
+                1.0 - 2.0 * (x * x + z * z),
+                2.0 * (y * z - x * w),
+            ],
+            [
+                2.0 * (x * z - y * w),
+                2.0 * (y * z + x * w),
+                1.0 - 2.0 * (x * x + y * y),
+            ],
+        ];
+        let base = pos.len() as u32;
+        for corner in 0..8u32 {
+            let l = [0, 1, 2].map(|k| if corner >> k & 1 == 1 { h[k] } else { -h[k] });
+            pos.push([0, 1, 2].map(|r| c[r] + m[r][0] * l[0] + m[r][1] * l[1] + m[r][2] * l[2]));
+        }
+        for f in FACES {
+            idx.push(f.map(|v| base + v));
+        }
+    }
+    (pos, idx)
+}
+
 fn obj(path: &str) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     let text = std::fs::read_to_string(path).expect("read OBJ");
     let mut pos = Vec::new();
@@ -102,6 +164,54 @@ fn obj(path: &str) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (pos, idx)
 }
 
+/// A binary little-endian PLY with float x, y, z vertices and `uchar int` face lists (the
+/// format of the shared meshes' `.ply` files).
+fn ply(path: &str) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let data = std::fs::read(path).expect("read PLY");
+    let end = data
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .expect("PLY header")
+        + 11;
+    let header = std::str::from_utf8(&data[..end]).expect("PLY header");
+    assert!(header.contains("binary_little_endian"), "binary PLY only");
+    let count = |what: &str| -> usize {
+        header
+            .lines()
+            .find_map(|l| l.strip_prefix(what))
+            .and_then(|n| n.trim().parse().ok())
+            .unwrap_or(0)
+    };
+    let (nv, nf) = (count("element vertex "), count("element face "));
+    let f32_at = |at: usize| f32::from_le_bytes(data[at..at + 4].try_into().unwrap());
+    let u32_at = |at: usize| u32::from_le_bytes(data[at..at + 4].try_into().unwrap());
+    let pos: Vec<[f32; 3]> = (0..nv)
+        .map(|v| [0, 1, 2].map(|k| f32_at(end + 12 * v + 4 * k)))
+        .collect();
+    let mut idx = Vec::with_capacity(nf);
+    let mut at = end + 12 * nv;
+    for _ in 0..nf {
+        let n = data[at] as usize;
+        let f: Vec<u32> = (0..n).map(|k| u32_at(at + 1 + 4 * k)).collect();
+        for k in 1..n - 1 {
+            idx.push([f[0], f[k], f[k + 1]]);
+        }
+        at += 1 + 4 * n;
+    }
+    (pos, idx)
+}
+
+/// Nanoseconds this thread has run on a CPU (Linux: `/proc/thread-self/schedstat`; 0
+/// elsewhere), as of the last scheduler tick or switch: only sums over many calls are exact.
+/// Unlike wall time, it leaves out time spent waiting for a core, which on a shared machine is
+/// most of the noise.
+fn cpu_ns() -> u64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse().ok())
+        .unwrap_or(0)
+}
+
 /// The timed call (a separate symbol for `valgrind --toggle-collect=*refit_once*`).
 #[inline(never)]
 fn refit_once(device: &Device, info: hostas::BuildGeometryInfo, range: &[hostas::BuildRangeInfo]) {
@@ -119,7 +229,9 @@ fn main() {
     let (p, idx) = match scene.as_str() {
         "sphere" => cube_sphere(289),
         "soup" => soup(1_000_000),
+        "boxes" => boxes(83_334),
         "uv" => hostas_testkit::generate::uv_sphere(500),
+        path if path.ends_with(".ply") => ply(path),
         path => obj(path),
     };
     let flags = match std::env::var("REFIT_FLAGS").as_deref() {
@@ -139,6 +251,7 @@ fn main() {
         })
         .collect();
     let mut times = Vec::new();
+    let mut cpu = 0;
     for r in 0..reps {
         let verts = if r % 2 == 0 { &moved } else { &p };
         let geom = [hostas::quick::triangle_mesh(
@@ -160,21 +273,25 @@ fn main() {
             geometries: &geom,
             scratch: Some(&mut scratch),
         };
-        let t = Instant::now();
+        let (t, c) = (Instant::now(), cpu_ns());
         refit_once(&device, info, &range);
         times.push(t.elapsed().as_secs_f64());
+        cpu += cpu_ns() - c;
     }
     if reps == 0 {
         return;
     }
     times.sort_by(f64::total_cmp);
     let med = times[times.len() / 2];
+    let rate = |t: f64| idx.len() as f64 / t / 1e6;
     println!(
-        "{scene}: {} triangles, {} threads, refit median {:.2} ms = {:.1} Mtris/s (best {:.1})",
+        "{scene}: {} triangles, {} threads, refit median {:.2} ms = {:.1} Mtris/s (best {:.1}); \
+         this thread's CPU time: mean {:.1} Mtris/s",
         idx.len(),
         rayon::current_num_threads(),
         med * 1e3,
-        idx.len() as f64 / med / 1e6,
-        idx.len() as f64 / times[0] / 1e6
+        rate(med),
+        rate(times[0]),
+        rate(cpu as f64 * 1e-9 / reps as f64),
     );
 }

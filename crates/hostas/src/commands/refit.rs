@@ -5,18 +5,21 @@
 //! The fast path walks the tree depth-first in one pass: each leaf decodes its primitives
 //! straight from the application's bytes into the stored primitive section while computing
 //! the leaf's box, and each node's boxes are set once its children are done; large subtrees
-//! run in parallel. It relies on the layout the encoder writes (nodes in depth-first preorder,
-//! primitives in leaf order) and checks it as it goes. Anything it does not expect (an
-//! invalid primitive, an unusual layout) makes it give up, and the general path below redoes
-//! the whole update from the start: it reports the first error in stored order, exactly as
-//! before, and handles any layout [`View::parse`](crate::layout::view::View::parse) accepts.
-//! Both paths compute every box with the same operations in the same order, so the bytes
-//! written do not depend on the path taken or the thread count.
+//! run in parallel. For one triangle geometry on one thread (and for scattered ones on a few)
+//! the stored triangles are instead rewritten in primitive order first, reading the
+//! application's buffers in sequence, and the walk then only computes the boxes. It relies on
+//! the layout the encoder writes (nodes in depth-first preorder, primitives in leaf order) and
+//! checks it as it goes. Anything it does not expect (an invalid primitive, an unusual layout)
+//! makes it give up, and the general path below redoes the whole update from the start: it
+//! reports the first error in stored order, exactly as before, and handles any layout
+//! [`View::parse`](crate::layout::view::View::parse) accepts. Both paths compute every box
+//! with the same operations in the same order, so the bytes written do not depend on the path
+//! taken or the thread count.
 
 use super::build::Reader;
 use crate::error::{Error, Location, Result};
 use crate::input::aabbs::AabbReader;
-use crate::input::triangles::{F32Layout, TriangleReader};
+use crate::input::triangles::TriangleReader;
 use crate::layout::{
     EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
     MAX_LEAF_SIZE, NODE_SIZE, Node, PrimKind, WIDTH,
@@ -110,49 +113,109 @@ fn check_still_inactive(bytes: &[u8], h: &Header, readers: &[Reader], at: Locati
 // ---------------------------------------------------------------------------------------------
 // Fast path.
 
-/// Decodes primitives (by sequence number) into their stored form and boxes. `None` for
-/// anything but valid, active primitives: the caller gives up and the general path reports
-/// what is wrong.
-trait Source: Sync {
-    type Prim: bytemuck::Pod + Send;
-    fn get(&self, id: u32) -> Option<(Self::Prim, Aabb)>;
+/// A box as two four-lane arrays, lower and upper corner; the last lane is unspecified.
+type Lanes = ([f32; 4], [f32; 4]);
 
-    /// Decodes a leaf's primitives (ids `ids`) into `out`; returns the leaf's box: the union,
-    /// in order from [`Aabb::EMPTY`], of the primitives' boxes.
+/// [`crate::math::fmin`] lane by lane.
+#[inline(always)]
+fn min4(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    use crate::math::fmin;
+    [
+        fmin(a[0], b[0]),
+        fmin(a[1], b[1]),
+        fmin(a[2], b[2]),
+        fmin(a[3], b[3]),
+    ]
+}
+
+/// [`crate::math::fmax`] lane by lane.
+#[inline(always)]
+fn max4(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
+    use crate::math::fmax;
+    [
+        fmax(a[0], b[0]),
+        fmax(a[1], b[1]),
+        fmax(a[2], b[2]),
+        fmax(a[3], b[3]),
+    ]
+}
+
+/// The empty box ([`Aabb::EMPTY`]) as lanes.
+const EMPTY_LANES: Lanes = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
+
+#[inline(always)]
+fn to_aabb((lo, hi): Lanes) -> Aabb {
+    Aabb {
+        lo: [lo[0], lo[1], lo[2]],
+        hi: [hi[0], hi[1], hi[2]],
+    }
+}
+
+/// A stored primitive, and how a leaf's box follows from the stored primitives.
+trait StoredPrim: bytemuck::Pod + Send {
+    /// The union, in order from [`Aabb::EMPTY`], of the boxes of `prims` as the general path
+    /// computes them.
+    fn leaf_box(prims: &[Self]) -> Lanes;
+}
+
+/// A box being grown, as six scalars (kept apart so that the compiler uses scalar minima
+/// rather than compare-and-blend sequences).
+#[derive(Clone, Copy)]
+struct Grow {
+    lo: [f32; 3],
+    hi: [f32; 3],
+}
+
+impl Grow {
+    const EMPTY: Grow = Grow {
+        lo: [f32::INFINITY; 3],
+        hi: [f32::NEG_INFINITY; 3],
+    };
+
+    /// A triangle's box (`Aabb::point(a)`, `grow(b)`, `grow(c)`), then its union with the box
+    /// so far: the same operations in the same order as the general path's.
     #[inline(always)]
-    fn leaf(&self, ids: &[u32], out: &mut [Self::Prim]) -> Option<Aabb> {
-        let mut b = Aabb::EMPTY;
-        for (o, &id) in out.iter_mut().zip(ids) {
-            let (p, pb) = self.get(id)?;
-            *o = p;
-            b = b.union(&pb);
-        }
-        Some(b)
+    fn triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
+        use crate::math::{fmax, fmin};
+        let (lo, hi) = (&mut self.lo, &mut self.hi);
+        lo[0] = fmin(lo[0], fmin(fmin(a[0], b[0]), c[0]));
+        lo[1] = fmin(lo[1], fmin(fmin(a[1], b[1]), c[1]));
+        lo[2] = fmin(lo[2], fmin(fmin(a[2], b[2]), c[2]));
+        hi[0] = fmax(hi[0], fmax(fmax(a[0], b[0]), c[0]));
+        hi[1] = fmax(hi[1], fmax(fmax(a[1], b[1]), c[1]));
+        hi[2] = fmax(hi[2], fmax(fmax(a[2], b[2]), c[2]));
     }
 
-    /// Decodes the leaves of `node` (a node of leaves only), `counts[k]` primitives for slot
-    /// `k` (0: unused slot), consecutive in `ids` and `out`; sets each leaf's box in `node`
-    /// and returns their union (in slot order, from [`Aabb::EMPTY`]).
     #[inline(always)]
-    fn leaves(
-        &self,
-        ids: &[u32],
-        out: &mut [Self::Prim],
-        counts: &[u8; WIDTH],
-        node: &mut Node,
-    ) -> Option<Aabb> {
-        let mut at = 0;
-        let mut total = Aabb::EMPTY;
-        for (k, &n) in counts.iter().enumerate() {
-            let n = n as usize;
-            if n > 0 {
-                let b = self.leaf(ids.get(at..at + n)?, out.get_mut(at..at + n)?)?;
-                node.set_bounds(k, &b);
-                total = total.union(&b);
-                at += n;
-            }
+    fn lanes(self) -> Lanes {
+        (
+            [self.lo[0], self.lo[1], self.lo[2], 0.0],
+            [self.hi[0], self.hi[1], self.hi[2], 0.0],
+        )
+    }
+}
+
+impl StoredPrim for [f32; 9] {
+    #[inline(always)]
+    fn leaf_box(prims: &[[f32; 9]]) -> Lanes {
+        let mut g = Grow::EMPTY;
+        for f in prims {
+            g.triangle([f[0], f[1], f[2]], [f[3], f[4], f[5]], [f[6], f[7], f[8]]);
         }
-        Some(total)
+        g.lanes()
+    }
+}
+
+impl StoredPrim for [f32; 6] {
+    /// The stored form of a box is the box.
+    #[inline(always)]
+    fn leaf_box(prims: &[[f32; 6]]) -> Lanes {
+        let (mut lo, mut hi) = EMPTY_LANES;
+        for f in prims {
+            lo = min4(lo, [f[0], f[1], f[2], f[2]]);
+            hi = max4(hi, [f[3], f[4], f[5], f[5]]);
+        }
+        (lo, hi)
     }
 }
 
@@ -165,283 +228,237 @@ fn triangle_box(v: &[f32; 9]) -> Aabb {
     b
 }
 
-/// One `R32G32B32_SFLOAT` triangle geometry without a transform, with `IDX`-byte indices
-/// (0: none) and vertices `TIGHT`ly packed (stride 12) or not; the per-geometry checks are
-/// done once, up front.
-struct TriF32<'a, const IDX: usize, const TIGHT: bool> {
-    /// The range's indices, exactly `primitiveCount` triples (as `IDX` says).
-    index4: &'a [[u8; 12]],
-    index2: &'a [[u8; 6]],
-    /// From the first byte vertex 0 is read at; holds every vertex up to maxVertex.
-    verts: &'a [u8],
-    /// `TIGHT`: vertices 0 to maxVertex, exactly.
-    verts12: &'a [[u8; 12]],
-    stride: usize,
-    first_vertex: usize,
-    max_vertex: usize,
-    /// The geometry's first primitive sequence number, and its primitive count.
-    first: u32,
-    count: u32,
+/// Decodes primitives (by sequence number) into their stored form. `None` for anything but
+/// valid, active primitives: the caller gives up and the general path reports what is wrong.
+trait Source: Sync {
+    type Prim: StoredPrim;
+    /// Primitive `id`'s stored form.
+    fn get(&self, id: u32) -> Option<Self::Prim>;
+
+    /// Decodes primitives `ids` into `out` (as long).
+    #[inline]
+    fn decode(&self, ids: &[u32], out: &mut [Self::Prim]) -> Option<()> {
+        for (o, &id) in out.iter_mut().zip(ids) {
+            *o = self.get(id)?;
+        }
+        Some(())
+    }
+
+    /// Decodes a leaf's primitives `ids` into `out` (as long); returns the leaf's box.
+    #[inline(always)]
+    fn leaf(&self, ids: &[u32], out: &mut [Self::Prim]) -> Option<Lanes> {
+        self.decode(ids, out)?;
+        Some(Self::Prim::leaf_box(out))
+    }
 }
 
-impl<'a, const IDX: usize, const TIGHT: bool> TriF32<'a, IDX, TIGHT> {
-    /// `l.index_data` must hold the range's indices and `l.vertex_data` every vertex up to
-    /// maxVertex.
-    fn new(l: &F32Layout<'a>, first: u32, count: u32) -> Self {
-        let n = count as usize;
-        let (index4, index2) = match IDX {
-            4 => (bytemuck::cast_slice(&l.index_data[..12 * n]), &[][..]),
-            2 => (&[][..], bytemuck::cast_slice(&l.index_data[..6 * n])),
-            _ => (&[][..], &[][..]),
+/// A triangle geometry's index triples (`primitiveCount` of them).
+trait Indices: Sync + Copy {
+    /// Triangles in the range.
+    fn len(&self) -> usize;
+    /// Triangle `p`'s vertex indices, `firstVertex` not added; `None` past the range.
+    fn triple(&self, p: usize) -> Option<[usize; 3]>;
+    /// Every triangle's vertex indices, in order.
+    fn triples(&self) -> impl Iterator<Item = [usize; 3]>;
+}
+
+/// No index buffer: triangle `p` is vertices `3p`, `3p + 1`, `3p + 2`.
+#[derive(Clone, Copy)]
+struct NoIndices(usize);
+
+impl Indices for NoIndices {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.0
+    }
+    #[inline(always)]
+    fn triple(&self, p: usize) -> Option<[usize; 3]> {
+        (p < self.0).then_some([3 * p, 3 * p + 1, 3 * p + 2])
+    }
+    #[inline(always)]
+    fn triples(&self) -> impl Iterator<Item = [usize; 3]> {
+        (0..self.0).map(|p| [3 * p, 3 * p + 1, 3 * p + 2])
+    }
+}
+
+/// `u16` or `u32` indices: `N`-byte records (6 or 12) of three little-endian values.
+#[derive(Clone, Copy)]
+struct IndexRecords<'a, const N: usize>(&'a [[u8; N]]);
+
+impl<const N: usize> Indices for IndexRecords<'_, N> {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.0.len()
+    }
+    #[inline(always)]
+    fn triple(&self, p: usize) -> Option<[usize; 3]> {
+        Some(Self::decode(self.0.get(p)?))
+    }
+    #[inline(always)]
+    fn triples(&self) -> impl Iterator<Item = [usize; 3]> {
+        self.0.iter().map(Self::decode)
+    }
+}
+
+impl<const N: usize> IndexRecords<'_, N> {
+    #[inline(always)]
+    fn decode(b: &[u8; N]) -> [usize; 3] {
+        let k = N / 3;
+        let at = |i: usize| {
+            let mut v = [0u8; 4];
+            v[..k].copy_from_slice(&b[i * k..i * k + k]);
+            u32::from_le_bytes(v) as usize
         };
-        let verts12 = if TIGHT {
-            bytemuck::cast_slice(&l.vertex_data[..12 * (l.max_vertex + 1)])
-        } else {
-            &[][..]
-        };
-        TriF32 {
-            index4,
-            index2,
-            verts: l.vertex_data,
-            verts12,
-            stride: l.vertex_stride,
-            first_vertex: l.first_vertex,
-            max_vertex: l.max_vertex,
-            first,
-            count,
+        [at(0), at(1), at(2)]
+    }
+}
+
+/// A triangle geometry's `R32G32B32_SFLOAT` vertices 0 to maxVertex.
+trait Vertices: Sync + Copy {
+    /// Vertex `v`; `None` past maxVertex.
+    fn get(&self, v: usize) -> Option<[f32; 3]>;
+
+    /// Vertex `v`; NaNs past maxVertex.
+    #[inline(always)]
+    fn vertex(&self, v: usize) -> [f32; 3] {
+        self.get(v).unwrap_or([f32::NAN; 3])
+    }
+}
+
+/// Tightly packed (stride 12): exactly maxVertex + 1 records.
+#[derive(Clone, Copy)]
+struct Packed<'a>(&'a [[u8; 12]]);
+
+/// `stride` bytes apart; `data` holds every vertex up to `last`.
+#[derive(Clone, Copy)]
+struct Strided<'a> {
+    data: &'a [u8],
+    stride: usize,
+    last: usize,
+}
+
+#[inline(always)]
+fn vec3(b: &[u8; 12]) -> [f32; 3] {
+    let f = |k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
+    [f(0), f(1), f(2)]
+}
+
+impl Vertices for Packed<'_> {
+    #[inline(always)]
+    fn get(&self, v: usize) -> Option<[f32; 3]> {
+        self.0.get(v).map(vec3)
+    }
+}
+
+impl Vertices for Strided<'_> {
+    #[inline(always)]
+    fn get(&self, v: usize) -> Option<[f32; 3]> {
+        if v > self.last {
+            return None;
         }
+        let at = v.wrapping_mul(self.stride);
+        Some(vec3(
+            self.data.get(at..at.wrapping_add(12))?.try_into().ok()?,
+        ))
     }
+}
 
-    /// Vertex `v` (first vertex added, at most maxVertex).
-    #[inline(always)]
-    fn vertex(&self, v: usize) -> Option<[f32; 3]> {
-        let b: &[u8; 12] = if TIGHT {
-            self.verts12.get(v)?
-        } else {
-            let at = v * self.stride;
-            self.verts.get(at..at.wrapping_add(12))?.try_into().ok()?
-        };
-        let f = |k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
-        Some([f(0), f(1), f(2)])
-    }
+/// One `R32G32B32_SFLOAT` triangle geometry without a transform; the per-geometry checks are
+/// done once, up front.
+#[derive(Clone, Copy)]
+struct TriF32<I, V> {
+    index: I,
+    verts: V,
+    first_vertex: usize,
+    /// The geometry's first primitive sequence number.
+    first: u32,
+}
 
-    /// Triangle `id`'s three vertices.
+impl<I: Indices, V: Vertices> TriF32<I, V> {
+    /// The vertex indices (`firstVertex` added) of triangle `id`; out of range (so that
+    /// [`Self::triangle`] finds it inactive) past the geometry's range.
     #[inline(always)]
-    fn triangle(&self, id: u32) -> Option<[[f32; 3]; 3]> {
+    fn vertex_indices(&self, id: u32) -> [usize; 3] {
         let p = id.wrapping_sub(self.first) as usize;
         let fv = self.first_vertex;
-        let idx: [usize; 3] = match IDX {
-            4 => {
-                let b = self.index4.get(p)?;
-                [
-                    u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize + fv,
-                    u32::from_le_bytes([b[4], b[5], b[6], b[7]]) as usize + fv,
-                    u32::from_le_bytes([b[8], b[9], b[10], b[11]]) as usize + fv,
-                ]
-            }
-            2 => {
-                let b = self.index2.get(p)?;
-                [
-                    u16::from_le_bytes([b[0], b[1]]) as usize + fv,
-                    u16::from_le_bytes([b[2], b[3]]) as usize + fv,
-                    u16::from_le_bytes([b[4], b[5]]) as usize + fv,
-                ]
-            }
-            _ => {
-                if p >= self.count as usize {
-                    return None;
-                }
-                [3 * p + fv, 3 * p + 1 + fv, 3 * p + 2 + fv]
-            }
-        };
-        // (`TIGHT`: the same test, in the form that lets the compiler drop the bounds checks.)
-        let max = idx[0].max(idx[1]).max(idx[2]);
-        if (TIGHT && max >= self.verts12.len()) || (!TIGHT && max > self.max_vertex) {
-            return None;
+        match self.index.triple(p) {
+            Some(t) => [t[0] + fv, t[1] + fv, t[2] + fv],
+            None => [usize::MAX; 3],
         }
-        let v = [
-            self.vertex(idx[0])?,
-            self.vertex(idx[1])?,
-            self.vertex(idx[2])?,
-        ];
-        // Inactive (the general path reports it).
-        if v[0][0].is_nan() | v[1][0].is_nan() | v[2][0].is_nan() {
-            return None;
-        }
-        Some(v)
     }
-}
 
-impl<const IDX: usize, const TIGHT: bool> TriF32<'_, IDX, TIGHT> {
-    /// What [`Source::get`] returns for triangle `id`.
+    /// The stored form of the triangle with vertices `v`, and whether it is valid and active
+    /// (a vertex past maxVertex reads as NaNs).
     #[inline(always)]
-    fn get(&self, id: u32) -> Option<([f32; 9], Aabb)> {
-        let [a, b, c] = self.triangle(id)?;
-        let f = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-        Some((f, triangle_box(&f)))
+    fn triangle(&self, v: &[usize; 3]) -> ([f32; 9], bool) {
+        let (a, b, c) = (
+            self.verts.vertex(v[0]),
+            self.verts.vertex(v[1]),
+            self.verts.vertex(v[2]),
+        );
+        let active = !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
+        (
+            [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]],
+            active,
+        )
     }
 }
 
-/// Where a leaf's triangles come from: decoded from the application's buffers by id, or the
-/// stored ones as they are.
-trait TriDecode: Sync {
-    /// Triangle `id`, whose stored form is `stored` (before this update's write).
-    fn tri(&self, id: u32, stored: &[f32; 9]) -> Option<[[f32; 3]; 3]>;
-}
-
-impl<const IDX: usize, const TIGHT: bool> TriDecode for TriF32<'_, IDX, TIGHT> {
-    #[inline(always)]
-    fn tri(&self, id: u32, _: &[f32; 9]) -> Option<[[f32; 3]; 3]> {
-        self.triangle(id)
-    }
-}
-
-/// The stored triangles, already rewritten (by [`in_primitive_order`]): a refit over them only
-/// computes the boxes.
-struct Stored;
-
-impl TriDecode for Stored {
-    #[inline(always)]
-    fn tri(&self, _: u32, f: &[f32; 9]) -> Option<[[f32; 3]; 3]> {
-        Some([[f[0], f[1], f[2]], [f[3], f[4], f[5]], [f[6], f[7], f[8]]])
-    }
-}
-
-/// A [`Source`] of triangles from a [`TriDecode`], with the leaf loops of its own.
-struct Tris<D>(D);
-
-impl<D: TriDecode> Source for Tris<D> {
+impl<I: Indices, V: Vertices> Source for TriF32<I, V> {
     type Prim = [f32; 9];
-    /// (Unused: `leaf` and `leaves` do the work.)
-    fn get(&self, _: u32) -> Option<([f32; 9], Aabb)> {
-        None
+
+    #[inline]
+    fn get(&self, id: u32) -> Option<[f32; 9]> {
+        let (f, ok) = self.triangle(&self.vertex_indices(id));
+        ok.then_some(f)
     }
 
-    /// The same operations as the default.
+    /// Decodes and computes the box in one loop, every check folded into one flag.
     #[inline(always)]
-    fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Aabb> {
-        let (lo, hi) = self.one_leaf_box(ids, out)?;
-        Some(Aabb {
-            lo: [lo[0], lo[1], lo[2]],
-            hi: [hi[0], hi[1], hi[2]],
-        })
-    }
-
-    /// The same operations as the default, in a function of its own (one call per node).
-    #[inline(always)]
-    fn leaves(
-        &self,
-        ids: &[u32],
-        out: &mut [[f32; 9]],
-        counts: &[u8; WIDTH],
-        node: &mut Node,
-    ) -> Option<Aabb> {
-        let (lo, hi) = self.leaves_box(ids, out, counts, node)?;
-        Some(Aabb {
-            lo: [lo[0], lo[1], lo[2]],
-            hi: [hi[0], hi[1], hi[2]],
-        })
-    }
-}
-
-impl<D: TriDecode> Tris<D> {
-    /// [`Source::leaves`], the union as two four-lane arrays.
-    #[inline(never)]
-    fn leaves_box(
-        &self,
-        ids: &[u32],
-        out: &mut [[f32; 9]],
-        counts: &[u8; WIDTH],
-        node: &mut Node,
-    ) -> Option<([f32; 4], [f32; 4])> {
-        use crate::math::{fmax, fmin};
-        let mut at = 0;
-        let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
-        let (mut hx, mut hy, mut hz) = (f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
-        for (k, &n) in counts.iter().enumerate() {
-            let n = n as usize;
-            if n > 0 {
-                let (lo, hi) = self.leaf_box(ids.get(at..at + n)?, out.get_mut(at..at + n)?)?;
-                node.lo_x[k] = lo[0];
-                node.lo_y[k] = lo[1];
-                node.lo_z[k] = lo[2];
-                node.hi_x[k] = hi[0];
-                node.hi_y[k] = hi[1];
-                node.hi_z[k] = hi[2];
-                // Aabb::union, in slot order.
-                lx = fmin(lx, lo[0]);
-                ly = fmin(ly, lo[1]);
-                lz = fmin(lz, lo[2]);
-                hx = fmax(hx, hi[0]);
-                hy = fmax(hy, hi[1]);
-                hz = fmax(hz, hi[2]);
-                at += n;
-            }
-        }
-        Some(([lx, ly, lz, 0.0], [hx, hy, hz, 0.0]))
-    }
-
-    /// [`Self::leaf_box`] in a function of its own.
-    #[inline(never)]
-    fn one_leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
-        self.leaf_box(ids, out)
-    }
-
-    /// [`Source::leaf`], the box as two four-lane arrays. (Six scalars and this return type
-    /// keep the compiler from vectorizing the minima into compare-and-blend sequences.)
-    #[inline(always)]
-    fn leaf_box(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<([f32; 4], [f32; 4])> {
-        use crate::math::{fmax, fmin};
-        let (mut lx, mut ly, mut lz) = (f32::INFINITY, f32::INFINITY, f32::INFINITY);
-        let (mut hx, mut hy, mut hz) = (f32::NEG_INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+    fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Lanes> {
+        // (A copy, so that the compiler keeps the fields in registers.)
+        let d = *self;
+        let mut ok = true;
+        let mut bounds = Grow::EMPTY;
         for (o, &id) in out.iter_mut().zip(ids) {
-            let [a, b, c] = self.0.tri(id, o)?;
+            let v = d.vertex_indices(id);
+            let (a, b, c) = (
+                d.verts.vertex(v[0]),
+                d.verts.vertex(v[1]),
+                d.verts.vertex(v[2]),
+            );
+            ok &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
             *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-            // Aabb::point(a), grow(b), grow(c), then the union with the leaf's box so far.
-            lx = fmin(lx, fmin(fmin(a[0], b[0]), c[0]));
-            ly = fmin(ly, fmin(fmin(a[1], b[1]), c[1]));
-            lz = fmin(lz, fmin(fmin(a[2], b[2]), c[2]));
-            hx = fmax(hx, fmax(fmax(a[0], b[0]), c[0]));
-            hy = fmax(hy, fmax(fmax(a[1], b[1]), c[1]));
-            hz = fmax(hz, fmax(fmax(a[2], b[2]), c[2]));
+            bounds.triangle(a, b, c);
         }
-        Some(([lx, ly, lz, 0.0], [hx, hy, hz, 0.0]))
+        ok.then_some(bounds.lanes())
     }
 }
 
 /// Any triangle geometry, through the reader (what the general path does).
-fn reader_triangle(t: &TriangleReader, p: u32) -> Option<([f32; 9], Aabb)> {
+fn reader_triangle(t: &TriangleReader, p: u32) -> Option<[f32; 9]> {
     if p >= t.primitive_count {
         return None;
     }
-    let f = match t.triangle_fast(p) {
-        Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+    match t.triangle_fast(p) {
+        Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => Some(f),
         _ => {
             let v = t.triangle(p).ok()??;
-            [
+            Some([
                 v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2],
-            ]
+            ])
         }
-    };
-    Some((f, triangle_box(&f)))
-}
-
-fn reader_aabb(a: &AabbReader, p: u32) -> Option<([f32; 6], Aabb)> {
-    if p >= a.primitive_count {
-        return None;
     }
-    let b = a.aabb(p).ok()??;
-    Some(([b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]], b))
 }
 
 /// One triangle geometry, decoder chosen at run time.
 enum AnyTri<'a> {
-    I0(TriF32<'a, 0, false>),
-    I2(TriF32<'a, 2, false>),
-    I4(TriF32<'a, 4, false>),
-    I0T(TriF32<'a, 0, true>),
-    I2T(TriF32<'a, 2, true>),
-    I4T(TriF32<'a, 4, true>),
+    I0(TriF32<NoIndices, Strided<'a>>),
+    I2(TriF32<IndexRecords<'a, 6>, Strided<'a>>),
+    I4(TriF32<IndexRecords<'a, 12>, Strided<'a>>),
+    I0P(TriF32<NoIndices, Packed<'a>>),
+    I2P(TriF32<IndexRecords<'a, 6>, Packed<'a>>),
+    I4P(TriF32<IndexRecords<'a, 12>, Packed<'a>>),
     Reader(&'a TriangleReader<'a>, u32),
 }
 
@@ -452,24 +469,45 @@ impl<'a> AnyTri<'a> {
         let Some(l) = t.f32_layout() else {
             return AnyTri::Reader(t, first);
         };
-        let count = t.primitive_count;
+        let n = t.primitive_count as usize;
         let verts_ok = l
             .max_vertex
             .checked_mul(l.vertex_stride)
             .and_then(|e| e.checked_add(12))
             .is_some_and(|e| e <= l.vertex_data.len());
-        let index_ok = l.index_data.len() / 3 >= count as usize * l.index_size;
+        let index_ok = l.index_data.len() / 3 >= n * l.index_size;
         // (Transformed geometries are rare enough to go through the reader too.)
         if !(verts_ok && index_ok) || l.transform.is_some() {
             return AnyTri::Reader(t, first);
         }
+        let strided = Strided {
+            data: l.vertex_data,
+            stride: l.vertex_stride,
+            last: l.max_vertex,
+        };
+        let packed = || {
+            Packed(bytemuck::cast_slice(
+                &l.vertex_data[..12 * (l.max_vertex + 1)],
+            ))
+        };
+        let fv = l.first_vertex;
+        fn tri<I, V>(index: I, verts: V, first_vertex: usize, first: u32) -> TriF32<I, V> {
+            TriF32 {
+                index,
+                verts,
+                first_vertex,
+                first,
+            }
+        }
+        let i2 = || IndexRecords::<6>(bytemuck::cast_slice(&l.index_data[..6 * n]));
+        let i4 = || IndexRecords::<12>(bytemuck::cast_slice(&l.index_data[..12 * n]));
         match (l.index_size, l.vertex_stride == 12) {
-            (0, false) => AnyTri::I0(TriF32::new(&l, first, count)),
-            (2, false) => AnyTri::I2(TriF32::new(&l, first, count)),
-            (4, false) => AnyTri::I4(TriF32::new(&l, first, count)),
-            (0, true) => AnyTri::I0T(TriF32::new(&l, first, count)),
-            (2, true) => AnyTri::I2T(TriF32::new(&l, first, count)),
-            (4, true) => AnyTri::I4T(TriF32::new(&l, first, count)),
+            (0, false) => AnyTri::I0(tri(NoIndices(n), strided, fv, first)),
+            (2, false) => AnyTri::I2(tri(i2(), strided, fv, first)),
+            (4, false) => AnyTri::I4(tri(i4(), strided, fv, first)),
+            (0, true) => AnyTri::I0P(tri(NoIndices(n), packed(), fv, first)),
+            (2, true) => AnyTri::I2P(tri(i2(), packed(), fv, first)),
+            (4, true) => AnyTri::I4P(tri(i4(), packed(), fv, first)),
             _ => AnyTri::Reader(t, first),
         }
     }
@@ -478,14 +516,14 @@ impl<'a> AnyTri<'a> {
 impl Source for AnyTri<'_> {
     type Prim = [f32; 9];
     #[inline]
-    fn get(&self, id: u32) -> Option<([f32; 9], Aabb)> {
+    fn get(&self, id: u32) -> Option<[f32; 9]> {
         match self {
             AnyTri::I0(d) => d.get(id),
             AnyTri::I2(d) => d.get(id),
             AnyTri::I4(d) => d.get(id),
-            AnyTri::I0T(d) => d.get(id),
-            AnyTri::I2T(d) => d.get(id),
-            AnyTri::I4T(d) => d.get(id),
+            AnyTri::I0P(d) => d.get(id),
+            AnyTri::I2P(d) => d.get(id),
+            AnyTri::I4P(d) => d.get(id),
             AnyTri::Reader(t, first) => reader_triangle(t, id.wrapping_sub(*first)),
         }
     }
@@ -500,7 +538,7 @@ struct Multi<S> {
 impl<S: Source> Source for Multi<S> {
     type Prim = S::Prim;
     #[inline]
-    fn get(&self, id: u32) -> Option<(S::Prim, Aabb)> {
+    fn get(&self, id: u32) -> Option<S::Prim> {
         let g = self.firsts.partition_point(|&f| f <= id).checked_sub(1)?;
         self.geoms.get(g)?.get(id)
     }
@@ -514,8 +552,29 @@ struct AabbSource<'a> {
 impl Source for AabbSource<'_> {
     type Prim = [f32; 6];
     #[inline]
-    fn get(&self, id: u32) -> Option<([f32; 6], Aabb)> {
-        reader_aabb(self.reader, id.wrapping_sub(self.first))
+    fn get(&self, id: u32) -> Option<[f32; 6]> {
+        let p = id.wrapping_sub(self.first);
+        if p >= self.reader.primitive_count {
+            return None;
+        }
+        let b = self.reader.aabb(p).ok()??;
+        Some([b.lo[0], b.lo[1], b.lo[2], b.hi[0], b.hi[1], b.hi[2]])
+    }
+}
+
+/// The stored triangles, already rewritten (by [`in_primitive_order`]): a refit over them only
+/// computes the boxes.
+struct Written;
+
+impl Source for Written {
+    type Prim = [f32; 9];
+    /// (Unused: `decode` leaves the stored triangles as they are.)
+    fn get(&self, _: u32) -> Option<[f32; 9]> {
+        None
+    }
+    #[inline]
+    fn decode(&self, _: &[u32], _: &mut [[f32; 9]]) -> Option<()> {
+        Some(())
     }
 }
 
@@ -551,9 +610,9 @@ fn fused(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader]) 
                     AnyTri::I0(d) => refit_triangles(tree, d),
                     AnyTri::I2(d) => refit_triangles(tree, d),
                     AnyTri::I4(d) => refit_triangles(tree, d),
-                    AnyTri::I0T(d) => refit_triangles(tree, d),
-                    AnyTri::I2T(d) => refit_triangles(tree, d),
-                    AnyTri::I4T(d) => refit_triangles(tree, d),
+                    AnyTri::I0P(d) => refit_triangles(tree, d),
+                    AnyTri::I2P(d) => refit_triangles(tree, d),
+                    AnyTri::I4P(d) => refit_triangles(tree, d),
                     d @ AnyTri::Reader(..) => tree.refit(&d),
                 }
             } else {
@@ -576,24 +635,27 @@ fn fused(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader]) 
     }
 }
 
-/// Refits one fast-decoded triangle geometry: in one pass over the tree, or, when the leaves'
-/// primitives are scattered over the application's buffers (a triangle soup, where reading
-/// them in leaf order misses the cache on every triangle), by rewriting the stored triangles
-/// in primitive order first.
-fn refit_triangles<const IDX: usize, const TIGHT: bool>(
+/// Refits one fast-decoded triangle geometry: on one thread (or on a few, when the leaves'
+/// primitives are scattered over the application's buffers, as in a triangle soup) by
+/// rewriting the stored triangles in primitive order first, then computing the boxes from
+/// them; on more threads in one pass over the tree, subtrees in parallel.
+fn refit_triangles<I: Indices, V: Vertices>(
     tree: Tree<'_, [f32; 9]>,
-    d: TriF32<'_, IDX, TIGHT>,
+    d: TriF32<I, V>,
 ) -> Option<Aabb> {
     // The pass in primitive order is sequential; the tree walk in leaf order scales with
-    // threads (each waits on its own cache misses). On one or two threads the first is about
-    // four times as fast on a 1M soup (measured); from 8 threads on the walk should win
-    // (estimated from its speed per thread, not measured).
-    if rayon::current_num_threads() >= 8 || !scattered(tree.ids) {
-        return tree.refit(&Tris(d));
+    // threads (each waits on its own cache misses). On one thread the first reads the
+    // application's buffers in sequence and was faster on every scene measured (1M soup about
+    // 2x, 1M random boxes 1.5x, meshes 1.05-1.15x); on two it is about four times as fast on a
+    // 1M soup; from 8 threads on the walk should win (estimated from its speed per thread,
+    // not measured).
+    let threads = rayon::current_num_threads();
+    if threads >= 8 || (threads > 1 && !scattered(tree.ids)) {
+        return tree.refit(&d);
     }
     let Tree { ids, nodes, prims } = tree;
     in_primitive_order(&d, ids, prims)?;
-    Tree { ids, nodes, prims }.refit(&Tris(Stored))
+    Tree { ids, nodes, prims }.refit(&Written)
 }
 
 /// Whether consecutive stored primitives are mostly far apart in primitive order (sampled).
@@ -616,27 +678,33 @@ fn scattered(ids: &[u32]) -> bool {
 /// Rewrites the stored triangles (`prims`, ids `ids`) in primitive order: the application's
 /// buffers are read in sequence, the stored ones written at random. `None` if any triangle is
 /// not valid or the ids are not distinct (the general path then takes over).
-fn in_primitive_order<const IDX: usize, const TIGHT: bool>(
-    d: &TriF32<'_, IDX, TIGHT>,
+fn in_primitive_order<I: Indices, V: Vertices>(
+    d: &TriF32<I, V>,
     ids: &[u32],
     prims: &mut [[f32; 9]],
 ) -> Option<()> {
     const NONE: u32 = u32::MAX;
-    let mut slot = vec![NONE; d.count as usize];
+    let mut slot = vec![NONE; d.index.len()];
     for (s, &id) in ids.iter().enumerate() {
-        let e = slot.get_mut(id.wrapping_sub(d.first) as usize)?;
-        if *e != NONE {
-            return None;
-        }
-        *e = s as u32;
+        *slot.get_mut(id.wrapping_sub(d.first) as usize)? = s as u32;
     }
-    for (p, &s) in slot.iter().enumerate() {
+    // Distinct ids fill as many slots as there are ids.
+    let mut written = 0;
+    let mut active = true;
+    // (A copy, so that the compiler keeps the fields in registers.)
+    let d = *d;
+    let fv = d.first_vertex;
+    for (&s, t) in slot.iter().zip(d.index.triples()) {
         if s != NONE {
-            let [a, b, c] = d.triangle(d.first + p as u32)?;
+            let a = d.verts.get(t[0] + fv)?;
+            let b = d.verts.get(t[1] + fv)?;
+            let c = d.verts.get(t[2] + fv)?;
+            active &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
             *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+            written += 1;
         }
     }
-    Some(())
+    (active && written == ids.len()).then_some(())
 }
 
 /// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
@@ -657,7 +725,7 @@ struct Cursor {
     prim: usize,
 }
 
-impl<P: bytemuck::Pod + Send> Tree<'_, P> {
+impl<P: StoredPrim> Tree<'_, P> {
     /// Refits the whole tree; returns the root bounds (the union of the root's child boxes).
     fn refit<S: Source<Prim = P>>(self, src: &S) -> Option<Aabb> {
         if self.nodes.is_empty() || self.prims.is_empty() {
@@ -693,10 +761,16 @@ impl<P: bytemuck::Pod + Send> Tree<'_, P> {
             node: node_base + 1,
             prim: prim_base,
         };
-        let b = walk(
-            src, ids, nodes, prims, node_base, prim_base, node_base, &mut at, 1,
-        )?;
-        (at.node == node_base + nodes.len() && at.prim == prim_base + prims.len()).then_some(b)
+        let mut w = Walk {
+            src,
+            ids,
+            nodes,
+            prims,
+            node_base,
+            prim_base,
+        };
+        let b = to_aabb(w.node(node_base, &mut at, 1)?);
+        (at.node == node_base + w.nodes.len() && at.prim == prim_base + w.prims.len()).then_some(b)
     }
 
     /// Splits the root's used slots into tasks (an inner child's subtree, or a leaf), refits
@@ -785,7 +859,7 @@ impl<P: bytemuck::Pod + Send> Tree<'_, P> {
                     if t.prims.len() != n || !(1..=MAX_LEAF_SIZE).contains(&n) {
                         return None;
                     }
-                    src.leaf(t.ids, t.prims)?
+                    to_aabb(src.leaf(t.ids, t.prims)?)
                 } else {
                     t.subtree(src, nb, pb, split, depth + 1)?
                 };
@@ -817,99 +891,71 @@ fn leftmost_prim(nodes: &[Node], base: usize, mut c: usize) -> Option<usize> {
     None
 }
 
-/// Refits global node `i` and its subtree, sequentially, depth-first: children must be the
-/// next nodes in preorder (`at.node`) and leaves the next primitives (`at.prim`). `nodes` and
-/// `prims` start at global `node_base` and `prim_base`. Returns the union of node `i`'s
-/// child boxes.
-#[allow(clippy::too_many_arguments)]
-fn walk<S: Source>(
-    src: &S,
-    ids: &[u32],
-    nodes: &mut [Node],
-    prims: &mut [S::Prim],
+/// A sequential walk over a subtree: `nodes` and `prims` (with their `ids`) start at global
+/// `node_base` and `prim_base`.
+struct Walk<'w, 't, S: Source> {
+    src: &'w S,
+    ids: &'t [u32],
+    nodes: &'t mut [Node],
+    prims: &'t mut [S::Prim],
     node_base: usize,
     prim_base: usize,
-    i: usize,
-    at: &mut Cursor,
-    depth: u32,
-) -> Option<Aabb> {
-    if depth > MAX_DEPTH {
-        return None;
-    }
-    let li = i - node_base;
-    let (child, count) = {
-        let n = nodes.get(li)?;
-        (n.child, n.count)
-    };
-    if child.iter().all(|&c| c == EMPTY_CHILD || c & LEAF_BIT != 0) {
-        // A node of leaves only (most of them): one call decodes them all.
-        let start = at.prim;
-        let mut counts = [0u8; WIDTH];
-        for k in 0..WIDTH {
-            let c = child[k];
-            if c == EMPTY_CHILD {
-                continue;
-            }
-            let n = count[k] as usize;
-            if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
-                return None;
-            }
-            counts[k] = count[k];
-            at.prim += count[k] as usize;
+}
+
+impl<S: Source> Walk<'_, '_, S> {
+    /// Refits global node `i` and its subtree, depth-first: children must be the next nodes
+    /// in preorder (`at.node`) and leaves the next primitives (`at.prim`). Returns the union
+    /// of node `i`'s child boxes.
+    fn node(&mut self, i: usize, at: &mut Cursor, depth: u32) -> Option<Lanes> {
+        if depth > MAX_DEPTH {
+            return None;
         }
-        let (lo, hi) = (start.checked_sub(prim_base)?, at.prim - prim_base);
-        return src.leaves(
-            ids.get(lo..hi)?,
-            prims.get_mut(lo..hi)?,
-            &counts,
-            nodes.get_mut(li)?,
-        );
-    }
-    let mut boxes = [Aabb::EMPTY; WIDTH];
-    {
+        let li = i - self.node_base;
+        let (child, count) = {
+            let n = self.nodes.get(li)?;
+            (n.child, n.count)
+        };
+        let mut total = EMPTY_LANES;
+        let mut boxes = [EMPTY_LANES; WIDTH];
         for k in 0..WIDTH {
             let c = child[k];
             if c == EMPTY_CHILD {
                 continue;
             }
-            boxes[k] = if c & LEAF_BIT != 0 {
-                let first = (c & !LEAF_BIT) as usize;
+            let b = if c & LEAF_BIT != 0 {
                 let n = count[k] as usize;
-                if first != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
+                if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
                     return None;
                 }
-                let lo = first.checked_sub(prim_base)?;
+                let l = at.prim - self.prim_base;
                 at.prim += n;
-                src.leaf(ids.get(lo..lo + n)?, prims.get_mut(lo..lo + n)?)?
+                self.src
+                    .leaf(self.ids.get(l..l + n)?, self.prims.get_mut(l..l + n)?)?
             } else {
                 let c = c as usize;
                 if c != at.node {
                     return None;
                 }
                 at.node += 1;
-                walk(
-                    src,
-                    ids,
-                    nodes,
-                    prims,
-                    node_base,
-                    prim_base,
-                    c,
-                    at,
-                    depth + 1,
-                )?
+                self.node(c, at, depth + 1)?
             };
+            boxes[k] = b;
+            // Aabb::union, in slot order.
+            total = (min4(total.0, b.0), max4(total.1, b.1));
         }
-    }
-    let node = nodes.get_mut(li)?;
-    let mut total = Aabb::EMPTY;
-    for (k, b) in boxes.iter().enumerate() {
-        if child[k] != EMPTY_CHILD {
-            node.set_bounds(k, b);
-            total = total.union(b);
+        let node = self.nodes.get_mut(li)?;
+        for (k, (lo, hi)) in boxes.iter().enumerate() {
+            if child[k] != EMPTY_CHILD {
+                node.lo_x[k] = lo[0];
+                node.lo_y[k] = lo[1];
+                node.lo_z[k] = lo[2];
+                node.hi_x[k] = hi[0];
+                node.hi_y[k] = hi[1];
+                node.hi_z[k] = hi[2];
+            }
         }
+        Some(total)
     }
-    Some(total)
 }
 
 // ---------------------------------------------------------------------------------------------
