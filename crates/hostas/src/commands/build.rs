@@ -680,6 +680,7 @@ impl Device {
                 instance_updates.push((Self::instance_record(&inst, i, at)?, bounds));
             }
         }
+        let scratch: &mut [u8] = info.scratch.as_deref_mut().unwrap_or_default();
         self.with_dst_src(dst, Some(&src), at, |bytes, src_bytes| {
             if let Some(s) = src_bytes {
                 let used = src_header.used_size as usize;
@@ -710,6 +711,7 @@ impl Device {
                 &instance_updates,
                 at,
                 &validate,
+                scratch,
             )
         })
     }

@@ -39,13 +39,14 @@ pub(super) fn refit(
     instances: &[(InstanceRecord, Aabb)],
     at: Location,
     validate: &dyn Fn(&[u8]) -> Result<()>,
+    scratch: &mut [u8],
 ) -> Result<()> {
     if matches!(prim_kind, PrimKind::Triangles | PrimKind::Aabbs) {
         if h.stored_count < h.primitive_count {
             validate(bytes)?;
             check_still_inactive(bytes, h, readers, at)?;
         }
-        if let Some(root) = fused(bytes, h, prim_kind, readers) {
+        if let Some(root) = fused(bytes, h, prim_kind, readers, scratch) {
             let mut header = *h;
             header.bounds = root;
             bytes[..256].copy_from_slice(bytemuck::bytes_of(&header));
@@ -579,8 +580,15 @@ impl Source for Written {
 }
 
 /// The fast path; `None` when it gave up (nothing is reported, the general path takes over).
-/// Returns the root bounds.
-fn fused(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader]) -> Option<Aabb> {
+/// Returns the root bounds. `scratch` is the update's scratch memory
+/// ([`crate::layout::plan::update_scratch_size`]).
+fn fused(
+    bytes: &mut [u8],
+    h: &Header,
+    prim_kind: PrimKind,
+    readers: &[Reader],
+    scratch: &mut [u8],
+) -> Option<Aabb> {
     let n = h.stored_count as usize;
     let node_count = h.node_count as usize;
     let (head, nodes_part) = bytes.split_at_mut(h.nodes_offset as usize);
@@ -607,12 +615,12 @@ fn fused(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader]) 
             if geoms.len() == 1 {
                 let tree = Tree { ids, nodes, prims };
                 match geoms.pop()? {
-                    AnyTri::I0(d) => refit_triangles(tree, d),
-                    AnyTri::I2(d) => refit_triangles(tree, d),
-                    AnyTri::I4(d) => refit_triangles(tree, d),
-                    AnyTri::I0P(d) => refit_triangles(tree, d),
-                    AnyTri::I2P(d) => refit_triangles(tree, d),
-                    AnyTri::I4P(d) => refit_triangles(tree, d),
+                    AnyTri::I0(d) => refit_triangles(tree, d, scratch),
+                    AnyTri::I2(d) => refit_triangles(tree, d, scratch),
+                    AnyTri::I4(d) => refit_triangles(tree, d, scratch),
+                    AnyTri::I0P(d) => refit_triangles(tree, d, scratch),
+                    AnyTri::I2P(d) => refit_triangles(tree, d, scratch),
+                    AnyTri::I4P(d) => refit_triangles(tree, d, scratch),
                     d @ AnyTri::Reader(..) => tree.refit(&d),
                 }
             } else {
@@ -642,6 +650,7 @@ fn fused(bytes: &mut [u8], h: &Header, prim_kind: PrimKind, readers: &[Reader]) 
 fn refit_triangles<I: Indices, V: Vertices>(
     tree: Tree<'_, [f32; 9]>,
     d: TriF32<I, V>,
+    scratch: &mut [u8],
 ) -> Option<Aabb> {
     // The pass in primitive order is sequential; the tree walk in leaf order scales with
     // threads (each waits on its own cache misses). On one thread the first reads the
@@ -654,7 +663,11 @@ fn refit_triangles<I: Indices, V: Vertices>(
         return tree.refit(&d);
     }
     let Tree { ids, nodes, prims } = tree;
-    in_primitive_order(&d, ids, prims)?;
+    // The stored slot of each primitive, in scratch (4 bytes per primitive, aligned).
+    let skip = scratch.as_ptr().align_offset(4).min(scratch.len());
+    let slot_bytes = scratch.get_mut(skip..skip + 4 * d.index.len())?;
+    let slot: &mut [u32] = bytemuck::try_cast_slice_mut(slot_bytes).ok()?;
+    in_primitive_order(&d, ids, prims, slot)?;
     Tree { ids, nodes, prims }.refit(&Written)
 }
 
@@ -682,9 +695,10 @@ fn in_primitive_order<I: Indices, V: Vertices>(
     d: &TriF32<I, V>,
     ids: &[u32],
     prims: &mut [[f32; 9]],
+    slot: &mut [u32],
 ) -> Option<()> {
     const NONE: u32 = u32::MAX;
-    let mut slot = vec![NONE; d.index.len()];
+    slot.fill(NONE);
     for (s, &id) in ids.iter().enumerate() {
         *slot.get_mut(id.wrapping_sub(d.first) as usize)? = s as u32;
     }
@@ -1122,6 +1136,7 @@ mod tests {
     use super::*;
     use crate::device::Device;
     use crate::input::{AabbsData, BuildRangeInfo, Geometry, GeometryData, TrianglesData};
+    use crate::layout::plan;
     use crate::layout::view::View;
     use ash::vk;
 
@@ -1253,6 +1268,12 @@ mod tests {
     }
 
     /// The structure's bytes, in 64-byte aligned memory.
+    /// Update scratch of the size `build_sizes` reports for the structure `src`.
+    fn scratch_for(src: &[u8]) -> Vec<u8> {
+        let h: Header = bytemuck::pod_read_unaligned(&src[..256]);
+        vec![0; plan::update_scratch_size(h.primitive_count as u64) as usize]
+    }
+
     fn aligned(bytes: &[u8]) -> Vec<Node> {
         let mut buf = vec![Node::EMPTY; bytes.len().div_ceil(256)];
         bytemuck::cast_slice_mut::<Node, u8>(&mut buf)[..bytes.len()].copy_from_slice(bytes);
@@ -1313,7 +1334,7 @@ mod tests {
             .and(general_result.clone());
         // The fast path itself takes every valid update here.
         let fast = run(&|b, h| {
-            fused(b, h, prim_kind, &readers)
+            fused(b, h, prim_kind, &readers, &mut scratch_for(&src))
                 .map(|_| ())
                 .ok_or(Error::NotSupported(String::new()))
         });
@@ -1323,8 +1344,12 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap();
-            let (bytes, got) =
-                pool.install(|| run(&|b, h| refit(b, h, prim_kind, &readers, &[], at, &validate)));
+            let (bytes, got) = pool.install(|| {
+                run(&|b, h| {
+                    let mut scratch = scratch_for(&src);
+                    refit(b, h, prim_kind, &readers, &[], at, &validate, &mut scratch)
+                })
+            });
             assert_eq!(got, want, "{threads} threads");
             if got.is_ok() {
                 assert!(bytes == want_bytes, "bytes differ on {threads} threads");
@@ -1614,8 +1639,19 @@ mod tests {
                     Err(e) => Err(e),
                     Ok(v) => {
                         let h = *v.header;
+                        let mut scratch =
+                            vec![0; plan::update_scratch_size(h.primitive_count as u64) as usize];
                         pool.install(|| {
-                            refit(b, &h, PrimKind::Triangles, &readers, &[], at, &validate)
+                            refit(
+                                b,
+                                &h,
+                                PrimKind::Triangles,
+                                &readers,
+                                &[],
+                                at,
+                                &validate,
+                                &mut scratch,
+                            )
                         })
                         .map_err(|e| match e {
                             Error::NotBuilt { reason, .. } => reason,

@@ -51,8 +51,9 @@ impl Plan {
     }
 }
 
-/// Update scratch: update works in place and needs only a little (never zero: the CTS asserts
-/// non-zero scratch sizes).
-pub fn update_scratch_size(_max_prims: u64) -> u64 {
-    SECTION_ALIGN
+/// Update scratch: update works in place; the pass in primitive order keeps the stored slot
+/// of each primitive (4 bytes each, plus room to align). Never zero: the CTS asserts non-zero
+/// scratch sizes.
+pub fn update_scratch_size(max_prims: u64) -> u64 {
+    align_up(4 * max_prims + 4, SECTION_ALIGN).max(SECTION_ALIGN)
 }
