@@ -4,9 +4,9 @@
 //! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
 //! sweep split hands its sides their orders.
 
-use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
+use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
-use crate::layout::WIDTH;
+use crate::layout::{Node, WIDTH};
 use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
@@ -650,12 +650,10 @@ pub fn build(
     bins: usize,
     max_leaf: usize,
     traversal_cost: f32,
+    nodes: &mut [Node],
 ) -> Tree {
     if refs.is_empty() {
-        return Tree {
-            root: None,
-            nodes: Vec::new(),
-        };
+        return NodeList::new(nodes).tree(None);
     }
     let ctx = Ctx {
         bins: bins.clamp(2, MAX_BINS),
@@ -663,12 +661,9 @@ pub fn build(
         traversal_cost,
     };
     let info = RangeInfo::of(refs);
-    let mut out = NodeList::with_capacity(node_hint(refs.len()));
+    let mut out = NodeList::new(nodes);
     let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
-    Tree {
-        root: Some(root),
-        nodes: out.nodes,
-    }
+    out.tree(Some(root))
 }
 
 #[derive(Clone, Copy)]
@@ -802,7 +797,7 @@ fn build_child(
             *slot = build_child(s, a, b, i, ctx, depth + 1, out);
         }
     }
-    out.set(me, InnerNode::new(children.into_iter().take(count)));
+    out.set(me, tree::node(children.into_iter().take(count)));
     (info.bounds, Child::Inner(me))
 }
 
@@ -810,10 +805,12 @@ fn build_child(
 mod tests {
     use super::*;
     use crate::build::tree::{Child, Tree};
+    use crate::layout::{EMPTY_CHILD, LEAF_BIT};
 
-    /// Checks a tree over `refs`: every position in exactly one leaf, leaves of at most
-    /// `max_leaf`, every inner node full, every child box holding its primitives.
-    pub(crate) fn check(tree: &Tree, refs: &[PrimRef], max_leaf: usize) {
+    /// Checks a tree over `refs` with its nodes: every position in exactly one leaf, leaves of
+    /// at most `max_leaf`, every inner node full, every child box holding its primitives.
+    pub(crate) fn check(tree: &Tree, nodes: &[Node], refs: &[PrimRef], max_leaf: usize) {
+        assert!(!tree.overflow);
         let mut seen = vec![false; refs.len()];
         let mut stack = vec![tree.root.expect("a root")];
         while let Some((b, c)) = stack.pop() {
@@ -830,9 +827,25 @@ mod tests {
                     }
                 }
                 Child::Inner(i) => {
-                    let node = &tree.nodes[i as usize];
-                    assert_eq!(node.children().len(), WIDTH);
-                    stack.extend(node.children().iter().copied());
+                    assert!((i as usize) < tree.node_count);
+                    let node = &nodes[i as usize];
+                    for k in 0..WIDTH {
+                        let c = node.child[k];
+                        assert_ne!(c, EMPTY_CHILD, "a node not full");
+                        let b = Aabb {
+                            lo: [node.lo_x[k], node.lo_y[k], node.lo_z[k]],
+                            hi: [node.hi_x[k], node.hi_y[k], node.hi_z[k]],
+                        };
+                        let child = if c & LEAF_BIT != 0 {
+                            Child::Leaf {
+                                first: c & !LEAF_BIT,
+                                count: node.count[k] as u32,
+                            }
+                        } else {
+                            Child::Inner(c)
+                        };
+                        stack.push((b, child));
+                    }
                 }
             }
         }
@@ -849,8 +862,9 @@ mod tests {
     fn build_and_check(mut refs: Vec<PrimRef>) {
         let mut ids: Vec<u32> = refs.iter().map(|r| r.id).collect();
         let mut aux = refs.clone();
-        let tree = build(&mut refs, &mut aux, 32, 8, 2.0);
-        check(&tree, &refs, 8);
+        let mut nodes = vec![Node::EMPTY; node_hint(refs.len())];
+        let tree = build(&mut refs, &mut aux, 32, 8, 2.0, &mut nodes);
+        check(&tree, &nodes, &refs, 8);
         // The references are permuted, never lost or duplicated.
         let mut after: Vec<u32> = refs.iter().map(|r| r.id).collect();
         ids.sort_unstable();
