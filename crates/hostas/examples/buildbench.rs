@@ -1,7 +1,8 @@
 //! Build speed only, into memory and scratch allocated once (as `hostas bench` measures), on
-//! generated scenes: `buildbench SCENE PRESET [REPS]` with SCENE `sphere:N` (2N² triangles) or
-//! `soup:N` (N random triangles, centres in [0,100]³, vertices within ±1, as bench/peers) and
-//! PRESET one of fast-trace, fast-build, default, low-memory. Prints the median build time,
+//! generated scenes: `buildbench SCENE PRESET [REPS]` with SCENE `sphere:N` (4N² triangles: sphere:500 is 1M) or
+//! `soup:N` (N random triangles, centres in [0,100]³, vertices within ±1, as bench/peers) or
+//! `obj:PATH` (a Wavefront OBJ mesh, polygons as fans, e.g. ../shared/meshes/stanford-bunny.obj)
+//! and PRESET one of fast-trace, fast-build, default, low-memory. Prints the median build time,
 //! Mtris/s and the SAH cost. With REPS = 1 it is cheap enough to run under callgrind.
 
 use hostas::{AccelerationStructureCreateInfo, BuildGeometryInfo, Device, vk};
@@ -31,16 +32,46 @@ fn soup(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (p, idx)
 }
 
+/// Vertices and faces of an OBJ file (`v` and `f` lines only; faces as fans, negative
+/// indices relative to the end).
+fn obj(path: &str) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+    let text = std::fs::read_to_string(path).expect("readable OBJ file");
+    let (mut p, mut idx) = (Vec::new(), Vec::new());
+    for line in text.lines() {
+        let mut w = line.split_whitespace();
+        match w.next() {
+            Some("v") => {
+                let c: Vec<f32> = w.take(3).map(|x| x.parse().expect("coordinate")).collect();
+                p.push([c[0], c[1], c[2]]);
+            }
+            Some("f") => {
+                let f: Vec<u32> = w
+                    .map(|v| {
+                        let i: i64 = v.split('/').next().unwrap().parse().expect("index");
+                        (if i < 0 { p.len() as i64 + i } else { i - 1 }) as u32
+                    })
+                    .collect();
+                for k in 1..f.len().saturating_sub(1) {
+                    idx.push([f[0], f[k], f[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    (p, idx)
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let scene = args.get(1).map(String::as_str).unwrap_or("sphere:500");
     let preset = args.get(2).map(String::as_str).unwrap_or("fast-trace");
     let reps: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(5);
-    let (kind, n) = scene.split_once(':').unwrap_or((scene, "500"));
-    let n: u32 = n.parse().expect("scene size");
+    let (kind, arg) = scene.split_once(':').unwrap_or((scene, "500"));
+    let n = || arg.parse::<u32>().expect("scene size");
     let (p, idx) = match kind {
-        "sphere" => hostas_testkit::generate::uv_sphere(n),
-        "soup" => soup(n),
+        "sphere" => hostas_testkit::generate::uv_sphere(n()),
+        "soup" => soup(n()),
+        "obj" => obj(arg),
         _ => panic!("unknown scene {kind}"),
     };
     use vk::BuildAccelerationStructureFlagsKHR as F;

@@ -1,11 +1,12 @@
 //! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
 //! child with the largest surface area. Primitive references are partitioned in place, so the
 //! final order is the order of `refs` on return. Small ranges are split with an exact SAH
-//! sweep over sorted centroids instead of bins.
+//! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
+//! sweep split hands its sides their orders.
 
-use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
+use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
-use crate::layout::WIDTH;
+use crate::layout::{Node, WIDTH};
 use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
@@ -101,6 +102,13 @@ impl Acc {
         let c = [b.lo[0] + b.hi[0], b.lo[1] + b.hi[1], b.lo[2] + b.hi[2], 0.0];
         self.centroids.grow_point(&c);
     }
+    fn of(refs: &[PrimRef]) -> RangeInfo {
+        let mut acc = Acc::EMPTY;
+        for r in refs {
+            acc.add(r);
+        }
+        acc.info()
+    }
     fn info(&self) -> RangeInfo {
         RangeInfo {
             bounds: self.bounds.aabb(),
@@ -128,11 +136,7 @@ impl RangeInfo {
                 .map(RangeInfo::of)
                 .reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
         }
-        let mut acc = Acc::EMPTY;
-        for r in refs {
-            acc.add(r);
-        }
-        acc.info()
+        Acc::of(refs)
     }
 }
 
@@ -476,102 +480,108 @@ fn order_key(x: f32, i: usize) -> i32 {
     (b ^ (((b >> 31) as u32) >> 1) as i32) & !15 | i as i32
 }
 
-/// Exact SAH split of a small range: rank the centroids on each axis (branch-free: every pair
-/// compared; the keys are distinct, so the ranks are a permutation whatever the values) and
-/// sweep every position; the references are permuted once, for the winning axis.
-fn sweep_split(refs: &mut [PrimRef]) -> Split {
-    match refs.len() {
-        0..=2 => {
-            // One way to split two (a lone primitive cannot be split; callers never ask).
-            let mid = refs.len() / 2;
-            let (l, r) = refs.split_at(mid);
-            let (l, r) = (RangeInfo::of(l), RangeInfo::of(r));
-            let cost = l.bounds.half_area() + r.bounds.half_area();
-            Split {
-                mid,
-                left: l,
-                right: r,
-                cost,
+/// The primitives of a small range (at most [`SMALL`]) in centroid order on each axis, as
+/// positions in the range. Sorted once when the range is first swept; a sweep split hands
+/// each side its orders by filtering, so the sides are not sorted again.
+#[derive(Clone, Copy, Debug)]
+struct Orders([[u8; SMALL]; 3]);
+
+impl Orders {
+    /// Ranks the centroids on each axis (branch-free: every pair compared; the keys are
+    /// distinct, so the ranks are a permutation whatever the values).
+    fn of(refs: &[PrimRef]) -> Orders {
+        if refs.len() <= 8 {
+            Orders::rank::<8>(refs)
+        } else {
+            Orders::rank::<SMALL>(refs)
+        }
+    }
+    fn rank<const L: usize>(refs: &[PrimRef]) -> Orders {
+        // Padding keys are larger than any real one, so they never count.
+        let mut keys = [[i32::MAX; L]; 3];
+        for (i, r) in refs.iter().enumerate().take(L) {
+            let c = r.center2();
+            for k in 0..3 {
+                keys[k][i] = order_key(c[k], i);
             }
         }
-        3..=8 => sweep_split_n::<8>(refs),
-        _ => sweep_split_n::<SMALL>(refs),
+        let mut orders = [[0u8; SMALL]; 3];
+        for (key, order) in keys.iter().zip(&mut orders) {
+            // All ranks at once (vectorized over i): rank[i] counts the keys below key[i].
+            let mut rank = [0u32; L];
+            for &kj in key {
+                for (r, &ki) in rank.iter_mut().zip(key) {
+                    *r += (kj < ki) as u32;
+                }
+            }
+            for (i, &r) in rank.iter().enumerate().take(refs.len()) {
+                order[r as usize & (SMALL - 1)] = i as u8;
+            }
+        }
+        Orders(orders)
     }
 }
 
-fn sweep_split_n<const L: usize>(refs: &mut [PrimRef]) -> Split {
-    let n = refs.len().min(L);
-    let mut boxes = [B4::EMPTY; L];
-    // Padding keys are larger than any real one, so they never count.
-    let mut keys = [[i32::MAX; L]; 3];
-    for (i, r) in refs.iter().enumerate().take(L) {
-        boxes[i] = B4::of(r);
-        let c = boxes[i].center2();
-        for k in 0..3 {
-            keys[k][i] = order_key(c[k], i);
-        }
+/// Exact SAH split of a small range (2 to [`SMALL`] primitives) given its orders: sweep
+/// every position on every axis, then permute the references once, for the winning axis.
+/// Returns the split and the orders of both sides.
+fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+    let n = refs.len().min(SMALL);
+    // A box as a B4 carries the whole reference (lane 3 holds the id and the pad).
+    let mut boxes = [B4::EMPTY; SMALL];
+    for (b, r) in boxes.iter_mut().zip(refs.iter()) {
+        *b = B4::of(r);
     }
-    let mut best = (f32::INFINITY, n / 2);
-    let mut best_order = [0u8; L];
-    for key in &keys {
-        let mut order = [0u8; L];
-        for i in 0..n {
-            let ki = key[i];
-            let mut rank = 0u32;
-            for &kj in key {
-                rank += (kj < ki) as u32;
-            }
-            order[rank as usize & (L - 1)] = i as u8;
-        }
-        let mut right_area = [0f32; L];
+    let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
+    for (k, order) in orders.0.iter().enumerate() {
+        let mut right_area = [0f32; SMALL];
         let mut acc = B4::EMPTY;
         for i in (1..n).rev() {
-            acc.grow(&boxes[order[i] as usize & (L - 1)]);
+            acc.grow(&boxes[order[i] as usize & (SMALL - 1)]);
             right_area[i] = acc.half_area();
         }
         let mut acc = B4::EMPTY;
         for i in 1..n {
-            acc.grow(&boxes[order[i - 1] as usize & (L - 1)]);
+            acc.grow(&boxes[order[i - 1] as usize & (SMALL - 1)]);
             let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
-            if cost < best.0 {
-                best = (cost, i);
-                best_order = order;
-            }
+            // Selects, not branches: which position wins is data, not pattern.
+            let better = cost < best_cost;
+            best_cost = if better { cost } else { best_cost };
+            best_axis = if better { k } else { best_axis };
+            best_mid = if better { i } else { best_mid };
         }
     }
-    let (cost, mid) = best;
-    let (mut left, mut right) = (Acc::EMPTY, Acc::EMPTY);
-    if cost.is_finite() {
-        let copy: [PrimRef; L] = std::array::from_fn(|i| {
-            if i < n {
-                refs[i]
-            } else {
-                PrimRef::new(&Aabb::EMPTY, 0)
-            }
-        });
-        for (i, (dst, &src)) in refs.iter_mut().zip(&best_order[..n]).enumerate() {
-            *dst = copy[src as usize & (L - 1)];
-            if i < mid {
-                left.add(dst);
-            } else {
-                right.add(dst);
-            }
-        }
-    } else {
-        for (i, r) in refs.iter().enumerate() {
-            if i < mid {
-                left.add(r);
-            } else {
-                right.add(r);
-            }
+    // No finite cost (NaN bounds): split in the middle, in the current order.
+    let identity: [u8; SMALL] = std::array::from_fn(|i| i as u8);
+    let perm = orders.0.get(best_axis).unwrap_or(&identity);
+    let mut pos = [0u8; SMALL];
+    for (i, (dst, &src)) in refs.iter_mut().zip(&perm[..n]).enumerate() {
+        let b = &boxes[src as usize & (SMALL - 1)];
+        *dst = bytemuck::cast([b.lo, b.hi]);
+        pos[src as usize & (SMALL - 1)] = i as u8;
+    }
+    let (left, right) = refs.split_at(best_mid);
+    let (left, right) = (Acc::of(left), Acc::of(right));
+    // Each side's orders: the range's orders filtered, as positions after the permutation.
+    let mid = best_mid as u8;
+    let (mut lo, mut ro) = ([[0u8; SMALL]; 3], [[0u8; SMALL]; 3]);
+    for k in 0..3 {
+        let (mut li, mut ri) = (0, 0);
+        for &o in &orders.0[k][..n] {
+            let p = pos[o as usize & (SMALL - 1)];
+            lo[k][li & (SMALL - 1)] = p;
+            ro[k][ri & (SMALL - 1)] = p.wrapping_sub(mid);
+            li += (p < mid) as usize;
+            ri += (p >= mid) as usize;
         }
     }
-    Split {
-        mid,
-        left: left.info(),
-        right: right.info(),
-        cost,
-    }
+    let split = Split {
+        mid: best_mid,
+        left,
+        right,
+        cost: best_cost,
+    };
+    (split, Orders(lo), Orders(ro))
 }
 
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
@@ -597,20 +607,41 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     }
 }
 
+/// Splits a range with at least two primitives; `orders` are the range's orders when a
+/// sweep split made it. Small ranges come back with the orders of both sides.
 fn split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     info: &RangeInfo,
+    orders: Option<&Orders>,
     ctx: &Ctx,
     depth: u32,
-) -> Split {
+) -> (Split, Option<Orders>, Option<Orders>) {
     if depth >= MEDIAN_DEPTH {
-        return median_split(refs, info);
+        return (median_split(refs, info), None, None);
+    }
+    if refs.len() == 2 {
+        // One way to split two: no orders to sort or sweep.
+        let (l, r) = (Acc::of(&refs[..1]), Acc::of(&refs[1..]));
+        let cost = l.bounds.half_area() + r.bounds.half_area();
+        let one = Orders([[0; SMALL]; 3]);
+        let s = Split {
+            mid: 1,
+            left: l,
+            right: r,
+            cost,
+        };
+        return (s, Some(one), Some(one));
     }
     if refs.len() <= SMALL {
-        return sweep_split(refs);
+        let (s, l, r) = match orders {
+            Some(o) => sweep_split(refs, o),
+            None => sweep_split(refs, &Orders::of(refs)),
+        };
+        return (s, Some(l), Some(r));
     }
-    binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info))
+    let s = binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info));
+    (s, None, None)
 }
 
 pub fn build(
@@ -619,12 +650,10 @@ pub fn build(
     bins: usize,
     max_leaf: usize,
     traversal_cost: f32,
+    nodes: &mut [Node],
 ) -> Tree {
     if refs.is_empty() {
-        return Tree {
-            root: None,
-            nodes: Vec::new(),
-        };
+        return NodeList::new(nodes).tree(None);
     }
     let ctx = Ctx {
         bins: bins.clamp(2, MAX_BINS),
@@ -632,12 +661,9 @@ pub fn build(
         traversal_cost,
     };
     let info = RangeInfo::of(refs);
-    let mut out = NodeList::with_capacity(node_hint(refs.len()));
+    let mut out = NodeList::new(nodes);
     let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
-    Tree {
-        root: Some(root),
-        nodes: out.nodes,
-    }
+    out.tree(Some(root))
 }
 
 #[derive(Clone, Copy)]
@@ -645,6 +671,7 @@ struct Part {
     begin: usize,
     end: usize,
     info: RangeInfo,
+    orders: Option<Orders>,
 }
 
 fn build_child(
@@ -670,7 +697,7 @@ fn build_child(
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
-    let first = split(refs, aux, &info, ctx, depth);
+    let (first, first_l, first_r) = split(refs, aux, &info, None, ctx, depth);
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
         if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
@@ -681,16 +708,19 @@ fn build_child(
         begin: 0,
         end: 0,
         info: RangeInfo::EMPTY,
+        orders: None,
     }; WIDTH];
     parts[0] = Part {
         begin: 0,
         end: first.mid,
         info: first.left,
+        orders: first_l,
     };
     parts[1] = Part {
         begin: first.mid,
         end: n,
         info: first.right,
+        orders: first_r,
     };
     let mut count = 2;
     while count < WIDTH {
@@ -706,10 +736,11 @@ fn build_child(
         }
         let Some(i) = pick else { break };
         let p = parts[i];
-        let s = split(
+        let (s, lo, ro) = split(
             &mut refs[p.begin..p.end],
             &mut aux[p.begin..p.end],
             &p.info,
+            p.orders.as_ref(),
             ctx,
             depth,
         );
@@ -717,11 +748,13 @@ fn build_child(
             begin: p.begin,
             end: p.begin + s.mid,
             info: s.left,
+            orders: lo,
         };
         parts[count] = Part {
             begin: p.begin + s.mid,
             end: p.end,
             info: s.right,
+            orders: ro,
         };
         count += 1;
     }
@@ -764,6 +797,152 @@ fn build_child(
             *slot = build_child(s, a, b, i, ctx, depth + 1, out);
         }
     }
-    out.set(me, InnerNode::new(children.into_iter().take(count)));
+    out.set(me, tree::node(children.into_iter().take(count)));
     (info.bounds, Child::Inner(me))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::build::tree::{Child, Tree};
+    use crate::layout::{EMPTY_CHILD, LEAF_BIT};
+
+    /// Checks a tree over `refs` with its nodes: every position in exactly one leaf, leaves of
+    /// at most `max_leaf`, every inner node full, every child box holding its primitives.
+    pub(crate) fn check(tree: &Tree, nodes: &[Node], refs: &[PrimRef], max_leaf: usize) {
+        assert!(!tree.overflow);
+        let mut seen = vec![false; refs.len()];
+        let mut stack = vec![tree.root.expect("a root")];
+        while let Some((b, c)) = stack.pop() {
+            match c {
+                Child::Leaf { first, count } => {
+                    assert!(count as usize <= max_leaf.max(WIDTH - 1), "leaf of {count}");
+                    for i in first..first + count {
+                        assert!(!seen[i as usize], "position {i} twice");
+                        seen[i as usize] = true;
+                        let r = refs[i as usize].bounds();
+                        for k in 0..3 {
+                            assert!(b.lo[k] <= r.lo[k] && r.hi[k] <= b.hi[k]);
+                        }
+                    }
+                }
+                Child::Inner(i) => {
+                    assert!((i as usize) < tree.node_count);
+                    let node = &nodes[i as usize];
+                    for k in 0..WIDTH {
+                        let c = node.child[k];
+                        assert_ne!(c, EMPTY_CHILD, "a node not full");
+                        let b = Aabb {
+                            lo: [node.lo_x[k], node.lo_y[k], node.lo_z[k]],
+                            hi: [node.hi_x[k], node.hi_y[k], node.hi_z[k]],
+                        };
+                        let child = if c & LEAF_BIT != 0 {
+                            Child::Leaf {
+                                first: c & !LEAF_BIT,
+                                count: node.count[k] as u32,
+                            }
+                        } else {
+                            Child::Inner(c)
+                        };
+                        stack.push((b, child));
+                    }
+                }
+            }
+        }
+        assert!(seen.iter().all(|&s| s), "a position in no leaf");
+    }
+
+    fn refs_of(boxes: impl Iterator<Item = Aabb>) -> Vec<PrimRef> {
+        boxes
+            .enumerate()
+            .map(|(i, b)| PrimRef::new(&b, i as u32))
+            .collect()
+    }
+
+    fn build_and_check(mut refs: Vec<PrimRef>) {
+        let mut ids: Vec<u32> = refs.iter().map(|r| r.id).collect();
+        let mut aux = refs.clone();
+        let mut nodes = vec![Node::EMPTY; node_hint(refs.len())];
+        let tree = build(&mut refs, &mut aux, 32, 8, 2.0, &mut nodes);
+        check(&tree, &nodes, &refs, 8);
+        // The references are permuted, never lost or duplicated.
+        let mut after: Vec<u32> = refs.iter().map(|r| r.id).collect();
+        ids.sort_unstable();
+        after.sort_unstable();
+        assert_eq!(ids, after);
+    }
+
+    /// Small ranges go through the sorted sweep, with orders handed from split to split:
+    /// random boxes, identical centroids, ties on one axis, every size up to a few nodes.
+    #[test]
+    fn small_ranges_make_valid_trees() {
+        let mut seed = 12345u32;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32
+        };
+        for n in 1..80usize {
+            let random: Vec<Aabb> = (0..n)
+                .map(|_| {
+                    let c = [rnd() * 10.0, rnd() * 10.0, rnd() * 10.0];
+                    let e = rnd();
+                    Aabb {
+                        lo: c.map(|x| x - e),
+                        hi: c.map(|x| x + e),
+                    }
+                })
+                .collect();
+            build_and_check(refs_of(random.iter().copied()));
+            let same = Aabb {
+                lo: [1.0; 3],
+                hi: [2.0; 3],
+            };
+            build_and_check(refs_of(std::iter::repeat_n(same, n)));
+            // Equal centroids on x only, growing boxes (nested, all sharing one centre).
+            build_and_check(refs_of((0..n).map(|i| Aabb {
+                lo: [0.0, i as f32, -(i as f32)],
+                hi: [2.0, i as f32 + 1.0, -(i as f32) + 1.0],
+            })));
+            build_and_check(refs_of((0..n).map(|i| Aabb {
+                lo: [-(i as f32); 3],
+                hi: [i as f32; 3],
+            })));
+        }
+    }
+
+    /// The orders a sweep split hands to each side are the sides' own orders (distinct
+    /// centroids, so no ties to break differently).
+    #[test]
+    fn sweep_hands_down_the_sides_orders() {
+        let mut seed = 777u32;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed as f32 / u32::MAX as f32
+        };
+        for n in 3..=SMALL {
+            for _ in 0..50 {
+                let mut refs = refs_of((0..n).map(|_| {
+                    let c = [rnd(), rnd(), rnd()];
+                    let e = rnd() * 0.1;
+                    Aabb {
+                        lo: c.map(|x| x - e),
+                        hi: c.map(|x| x + e),
+                    }
+                }));
+                let orders = Orders::of(&refs);
+                let (s, lo, ro) = sweep_split(&mut refs, &orders);
+                assert!(s.mid > 0 && s.mid < n);
+                for (side, o) in [(&refs[..s.mid], lo), (&refs[s.mid..], ro)] {
+                    let fresh = Orders::of(side);
+                    for k in 0..3 {
+                        assert_eq!(o.0[k][..side.len()], fresh.0[k][..side.len()]);
+                    }
+                }
+            }
+        }
+    }
 }

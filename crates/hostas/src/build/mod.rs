@@ -133,18 +133,25 @@ pub(crate) const PARALLEL_THRESHOLD: usize = 4096;
 pub(crate) const MEDIAN_DEPTH: u32 = 40;
 
 /// Builds a tree over `refs`, reordering them: leaves refer to final positions in `refs`.
-/// `aux`, `keys` and `keys_tmp` are working space of the same length (from build scratch).
+/// `aux`, `keys` and `keys_tmp` are working space of the same length (from build scratch);
+/// the inner nodes are written into `nodes` (the structure's node section).
 pub fn build(
     preset: &Preset,
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     keys: &mut [u64],
     keys_tmp: &mut [u64],
+    nodes: &mut [crate::layout::Node],
 ) -> tree::Tree {
     match preset.algorithm {
-        Algorithm::BinnedSah { bins } => {
-            binned_sah::build(refs, aux, bins, preset.max_leaf, preset.traversal_cost)
-        }
-        Algorithm::Morton => morton::build(refs, aux, keys, keys_tmp, preset.max_leaf),
+        Algorithm::BinnedSah { bins } => binned_sah::build(
+            refs,
+            aux,
+            bins,
+            preset.max_leaf,
+            preset.traversal_cost,
+            nodes,
+        ),
+        Algorithm::Morton => morton::build(refs, aux, keys, keys_tmp, preset.max_leaf, nodes),
     }
 }

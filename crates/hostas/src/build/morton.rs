@@ -3,9 +3,9 @@
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 
 use super::binned_sah::RangeInfo;
-use super::tree::{Child, InnerNode, NodeList, Tree, node_hint};
+use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
-use crate::layout::WIDTH;
+use crate::layout::{Node, WIDTH};
 use crate::math::Aabb;
 use rayon::prelude::*;
 
@@ -65,13 +65,11 @@ pub fn build(
     keys: &mut [u64],
     tmp: &mut [u64],
     max_leaf: usize,
+    nodes: &mut [Node],
 ) -> Tree {
     let n = refs.len();
     if n == 0 {
-        return Tree {
-            root: None,
-            nodes: Vec::new(),
-        };
+        return NodeList::new(nodes).tree(None);
     }
     let info = RangeInfo::of(refs);
     let c = info.centroids;
@@ -114,12 +112,9 @@ pub fn build(
         .with_min_len(PARALLEL_THRESHOLD)
         .for_each(|(r, a)| *r = *a);
     let codes = &*codes;
-    let mut out = NodeList::with_capacity(node_hint(n));
+    let mut out = NodeList::new(nodes);
     let root = build_child(refs, codes, 0, max_leaf.max(4), 0, &mut out);
-    Tree {
-        root: Some(root),
-        nodes: out.nodes,
-    }
+    out.tree(Some(root))
 }
 
 /// Position of the first code in `codes` that differs from the first in the highest differing
@@ -219,6 +214,6 @@ fn build_child(
     for (b, _) in &children[..live] {
         bounds = bounds.union(b);
     }
-    out.set(me, InnerNode::new(children.into_iter().take(live)));
+    out.set(me, tree::node(children.into_iter().take(live)));
     (bounds, Child::Inner(me))
 }

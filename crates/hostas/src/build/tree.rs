@@ -1,96 +1,141 @@
-//! The builders' output: an 8-wide tree over positions in the final primitive order. Builders
-//! know geometry, not bytes; `layout::encode` turns this into bytes.
+//! The builders' output: an 8-wide tree over positions in the final primitive order, written
+//! straight into the structure's node section in its final form ([`Node`]), so no tree is
+//! kept on the heap and encoding only sums the SAH.
 //!
-//! The inner nodes sit in one array in depth-first order (a node, then its children's subtrees
-//! in slot order), the order the encoder writes them in, so encoding is a plain map over the
-//! array. Builders append a node before its children (see [`NodeList`]); subtrees built on
-//! other threads are appended whole, their indices shifted.
+//! The inner nodes sit in depth-first order (a node, then its children's subtrees in slot
+//! order), the order of the layout. Builders reserve a node before building its children and
+//! fill it in afterwards (see [`NodeList`]); subtrees built on other threads go into lists of
+//! their own and are appended whole, their indices shifted.
 
-use crate::layout::WIDTH;
+use crate::layout::{LEAF_BIT, Node, WIDTH};
 use crate::math::Aabb;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Child {
     /// Primitives `first..first + count` of the final order.
     Leaf { first: u32, count: u32 },
-    /// Index of an inner node in [`Tree::nodes`].
+    /// Index of an inner node in the node list.
     Inner(u32),
 }
 
-/// An inner node with up to `WIDTH` children (always all of them, see the size plan), each
-/// with its exact bounds.
-#[derive(Clone, Copy, Debug)]
-pub struct InnerNode {
-    slots: [(Aabb, Child); WIDTH],
-    len: u8,
-}
-
-impl InnerNode {
-    const PLACEHOLDER: InnerNode = InnerNode {
-        slots: [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH],
-        len: 0,
-    };
-    pub fn new(children: impl IntoIterator<Item = (Aabb, Child)>) -> InnerNode {
-        let mut node = InnerNode::PLACEHOLDER;
-        for c in children.into_iter().take(WIDTH) {
-            node.slots[node.len as usize] = c;
-            node.len += 1;
+/// The node for up to `WIDTH` children, each with its exact bounds (builders always give all
+/// of them, see the size plan); missing slots stay empty.
+pub fn node(children: impl IntoIterator<Item = (Aabb, Child)>) -> Node {
+    let mut node = Node::EMPTY;
+    for (k, (b, c)) in children.into_iter().take(WIDTH).enumerate() {
+        node.set_bounds(k, &b);
+        match c {
+            Child::Leaf { first, count } => {
+                node.child[k] = LEAF_BIT | first;
+                node.count[k] = count as u8;
+            }
+            Child::Inner(i) => node.child[k] = i,
         }
-        node
     }
-    pub fn children(&self) -> &[(Aabb, Child)] {
-        &self.slots[..self.len as usize]
-    }
+    node
 }
 
 /// A built tree: `root` covers every stored primitive (`None` when there are none); when it
-/// is inner, it is `nodes[0]`.
+/// is inner, it is node 0 of the `node_count` nodes written. `overflow` says the builder
+/// needed more nodes than the section holds (a bug; encoding reports it).
 #[derive(Debug)]
 pub struct Tree {
     pub root: Option<(Aabb, Child)>,
-    pub nodes: Vec<InnerNode>,
+    pub node_count: usize,
+    pub overflow: bool,
 }
 
-/// Inner nodes being appended in depth-first order.
-#[derive(Debug, Default)]
-pub struct NodeList {
-    pub nodes: Vec<InnerNode>,
+enum Storage<'a> {
+    /// The structure's node section.
+    Section(&'a mut [Node]),
+    /// A subtree built on its own, appended later.
+    Owned(Vec<Node>),
 }
 
-impl NodeList {
-    pub fn with_capacity(n: usize) -> NodeList {
+/// Inner nodes being written in depth-first order.
+pub struct NodeList<'a> {
+    nodes: Storage<'a>,
+    len: usize,
+    overflow: bool,
+}
+
+impl<'a> NodeList<'a> {
+    /// Writes into `section` (the structure's nodes).
+    pub fn new(section: &'a mut [Node]) -> NodeList<'a> {
         NodeList {
-            nodes: Vec::with_capacity(n),
+            nodes: Storage::Section(section),
+            len: 0,
+            overflow: false,
         }
+    }
+    /// A list of its own, for a subtree built on another thread.
+    pub fn with_capacity(n: usize) -> NodeList<'static> {
+        NodeList {
+            nodes: Storage::Owned(Vec::with_capacity(n)),
+            len: 0,
+            overflow: false,
+        }
+    }
+    /// The tree with this list's nodes.
+    pub fn tree(&self, root: Option<(Aabb, Child)>) -> Tree {
+        Tree {
+            root,
+            node_count: self.len,
+            overflow: self.overflow,
+        }
+    }
+    fn as_slice(&self) -> &[Node] {
+        match &self.nodes {
+            Storage::Section(s) => &s[..self.len.min(s.len())],
+            Storage::Owned(v) => v,
+        }
+    }
+    fn push(&mut self, node: Node) {
+        match &mut self.nodes {
+            Storage::Section(s) => match s.get_mut(self.len) {
+                Some(slot) => *slot = node,
+                None => self.overflow = true,
+            },
+            Storage::Owned(v) => v.push(node),
+        }
+        self.len += 1;
     }
     /// Appends a node to be filled in by [`NodeList::set`] once its children are built.
     #[inline]
     pub fn reserve(&mut self) -> u32 {
-        self.nodes.push(InnerNode::PLACEHOLDER);
-        (self.nodes.len() - 1) as u32
+        match &mut self.nodes {
+            // Written whole by `set`: nothing to write now.
+            Storage::Section(s) => self.overflow |= self.len >= s.len(),
+            Storage::Owned(v) => v.push(Node::EMPTY),
+        }
+        self.len += 1;
+        (self.len - 1) as u32
     }
     #[inline]
-    pub fn set(&mut self, i: u32, node: InnerNode) {
-        if let Some(slot) = self.nodes.get_mut(i as usize) {
+    pub fn set(&mut self, i: u32, node: Node) {
+        let slot = match &mut self.nodes {
+            Storage::Section(s) => s.get_mut(i as usize),
+            Storage::Owned(v) => v.get_mut(i as usize),
+        };
+        if let Some(slot) = slot {
             *slot = node;
         }
     }
     /// Appends a subtree built on its own (its root, if inner, at its index 0) and returns
     /// the child as it reads in this list.
     pub fn append(&mut self, child: Child, sub: NodeList) -> Child {
-        let shift = self.nodes.len() as u32;
-        if shift == 0 {
-            self.nodes = sub.nodes;
-            return child;
-        }
-        self.nodes.extend(sub.nodes.into_iter().map(|mut n| {
-            for (_, c) in &mut n.slots[..n.len as usize] {
-                if let Child::Inner(i) = c {
-                    *i += shift;
+        let shift = self.len as u32;
+        self.overflow |= sub.overflow;
+        for n in sub.as_slice() {
+            let mut n = *n;
+            for c in &mut n.child {
+                // Leaves and empty slots (`EMPTY_CHILD`) have the leaf bit.
+                if *c & LEAF_BIT == 0 {
+                    *c += shift;
                 }
             }
-            n
-        }));
+            self.push(n);
+        }
         match child {
             Child::Inner(i) => Child::Inner(i + shift),
             leaf => leaf,

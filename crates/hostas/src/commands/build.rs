@@ -534,13 +534,6 @@ impl Device {
         };
         let preset = Preset::from_flags(flags);
         let refs = &mut refs[..stored];
-        let tree = build::build(
-            &preset,
-            refs,
-            &mut aux[..stored],
-            &mut keys[..stored],
-            &mut keys_tmp[..stored],
-        );
 
         let fields = HeaderFields {
             kind: kind as u32,
@@ -552,8 +545,16 @@ impl Device {
             preset: preset.id,
         };
         let data = &*data;
-        let refs = &*refs;
         self.with_dst_src(dst, None, at, |bytes, _| {
+            // The builders write the nodes straight into the structure.
+            let tree = build::build(
+                &preset,
+                refs,
+                &mut aux[..stored],
+                &mut keys[..stored],
+                &mut keys_tmp[..stored],
+                encode::node_section(bytes, &plan)?,
+            );
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
             write_prims(bytes, &header, prim_kind, refs, data)
         })

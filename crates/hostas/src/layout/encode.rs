@@ -1,12 +1,14 @@
-//! Writes a built tree into a structure's memory range: header, geometry records and nodes in
-//! depth-first order. The caller then fills the primitive sections in the tree's final order.
-//! Nothing is assumed about the previous contents of the memory.
+//! Completes a structure around a built tree: the builders write the nodes straight into the
+//! node section ([`node_section`]); this writes the header and geometry records (and the
+//! node of a tree that is a single leaf). The caller then fills the primitive sections in the
+//! tree's final order. Nothing is assumed about the previous contents of the memory.
 
 use super::plan::Plan;
 use super::{
-    GeometryRecord, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH, Node,
+    EMPTY_CHILD, GeometryRecord, HEADER_SIZE, Header, LAYOUT_VERSION, LEAF_BIT, MAGIC, MAX_DEPTH,
+    Node,
 };
-use crate::build::tree::{Child, InnerNode, Tree};
+use crate::build::tree::{Child, Tree};
 use crate::error::{Error, Result};
 use crate::math::Aabb;
 use rayon::prelude::*;
@@ -26,8 +28,29 @@ pub struct HeaderFields {
 pub const SAH_NODE_COST: f32 = 1.0;
 pub const SAH_PRIM_COST: f32 = 1.0;
 
-/// Writes header, geometries and nodes into `dst` (the whole structure range). Returns the
-/// header written.
+/// The node section of `dst` (the whole structure range), for the builders to write into.
+pub fn node_section<'a>(dst: &'a mut [u8], plan: &Plan) -> Result<&'a mut [Node]> {
+    if (dst.len() as u64) < plan.total_size {
+        return Err(Error::RangeTooShort {
+            what: "acceleration structure",
+            needed: plan.total_size,
+            available: dst.len() as u64,
+            location: Default::default(),
+        });
+    }
+    bytemuck::try_cast_slice_mut(
+        &mut dst[plan.nodes_offset as usize
+            ..(plan.nodes_offset + super::NODE_SIZE * plan.node_capacity) as usize],
+    )
+    .map_err(|e| {
+        Error::NotSupported(format!(
+            "acceleration structure memory is not 64-byte aligned ({e})"
+        ))
+    })
+}
+
+/// Writes header and geometries into `dst` (the whole structure range), whose node section
+/// holds `tree`'s nodes. Returns the header written.
 pub fn encode(
     dst: &mut [u8],
     plan: &Plan,
@@ -49,16 +72,7 @@ pub fn encode(
             + super::GEOMETRY_RECORD_SIZE as usize * geometries.len()];
     g_bytes.copy_from_slice(bytemuck::cast_slice(geometries));
 
-    let nodes: &mut [Node] = bytemuck::try_cast_slice_mut(
-        &mut dst[plan.nodes_offset as usize
-            ..(plan.nodes_offset + super::NODE_SIZE * plan.node_capacity) as usize],
-    )
-    .map_err(|e| {
-        Error::NotSupported(format!(
-            "acceleration structure memory is not 64-byte aligned ({e})"
-        ))
-    })?;
-
+    let nodes = node_section(dst, plan)?;
     let root_area = match &tree.root {
         Some((b, _)) => b.half_area(),
         None => 0.0,
@@ -66,15 +80,15 @@ pub fn encode(
     let (bounds, node_count, depth, sah) = match &tree.root {
         None => (Aabb::EMPTY, 0, 0, 0.0),
         Some((b, Child::Inner(_))) => {
-            let count = tree.nodes.len();
-            if count > nodes.len() {
+            let count = tree.node_count;
+            if tree.overflow || count > nodes.len() {
                 return Err(Error::OutOfHostMemory(format!(
                     "tree needs {count} nodes, the plan has {}",
                     nodes.len()
                 )));
             }
-            let depth = check_depth(&tree.nodes)?;
-            let sah = write_nodes(&tree.nodes, &mut nodes[..count], root_area);
+            let depth = check_depth(&nodes[..count])?;
+            let sah = node_sah(&nodes[..count], root_area);
             (*b, count as u32, depth, sah + SAH_NODE_COST)
         }
         Some((b, Child::Leaf { first, count })) => {
@@ -119,9 +133,15 @@ pub fn encode(
     Ok(header)
 }
 
+/// The inner children of a node.
+fn inner_children(node: &Node) -> impl Iterator<Item = u32> + '_ {
+    // Leaves and empty slots (`EMPTY_CHILD`) have the leaf bit.
+    node.child.iter().copied().filter(|c| c & LEAF_BIT == 0)
+}
+
 /// Checks that every inner child comes after its parent (the depth-first order the builders
 /// promise) and returns the depth, at most `MAX_DEPTH`.
-fn check_depth(tree: &[InnerNode]) -> Result<u32> {
+fn check_depth(tree: &[Node]) -> Result<u32> {
     let mut depth = vec![0u8; tree.len()];
     let mut max = 1;
     if let Some(d) = depth.first_mut() {
@@ -129,68 +149,64 @@ fn check_depth(tree: &[InnerNode]) -> Result<u32> {
     }
     for (i, node) in tree.iter().enumerate() {
         let d = depth[i];
-        for (_, c) in node.children() {
-            if let Child::Inner(j) = *c {
-                let j = j as usize;
-                if j <= i || j >= tree.len() {
-                    return Err(Error::OutOfHostMemory(format!(
-                        "tree node {i} has child {j} out of order"
-                    )));
-                }
-                depth[j] = d + 1;
-                max = max.max(d as u32 + 1);
-                if max > MAX_DEPTH {
-                    return Err(Error::OutOfHostMemory(format!(
-                        "tree deeper than {MAX_DEPTH}"
-                    )));
-                }
+        for j in inner_children(node) {
+            let j = j as usize;
+            if j <= i || j >= tree.len() {
+                return Err(Error::OutOfHostMemory(format!(
+                    "tree node {i} has child {j} out of order"
+                )));
+            }
+            depth[j] = d + 1;
+            max = max.max(d as u32 + 1);
+            if max > MAX_DEPTH {
+                return Err(Error::OutOfHostMemory(format!(
+                    "tree deeper than {MAX_DEPTH}"
+                )));
             }
         }
     }
     Ok(max)
 }
 
-/// Node chunks written (and their SAH summed) per task; the sum is over fixed chunks in order,
-/// so the result does not depend on the thread count.
+/// Node chunks whose SAH is summed per task; the sum is over fixed chunks in order, so the
+/// result does not depend on the thread count.
 const CHUNK_NODES: usize = 1024;
 
-/// Writes the tree's nodes (index for index: the tree is already in the layout's order) and
-/// returns their SAH contribution below the root's own visit.
-fn write_nodes(tree: &[InnerNode], out: &mut [Node], root_area: f32) -> f32 {
+/// The SAH contribution of the nodes below the root's own visit.
+fn node_sah(tree: &[Node], root_area: f32) -> f32 {
     let inv_root = if root_area > 0.0 {
         1.0 / root_area as f64
     } else {
         0.0
     };
-    let rel_area = |b: &Aabb| -> f64 {
+    let rel_area = |n: &Node, k: usize| -> f64 {
         if root_area > 0.0 {
+            let b = Aabb {
+                lo: [n.lo_x[k], n.lo_y[k], n.lo_z[k]],
+                hi: [n.hi_x[k], n.hi_y[k], n.hi_z[k]],
+            };
             b.half_area() as f64 * inv_root
         } else {
             1.0
         }
     };
-    let sums: Vec<f64> = out
-        .par_chunks_mut(CHUNK_NODES)
-        .zip(tree.par_chunks(CHUNK_NODES))
-        .map(|(out, tree)| {
+    let sums: Vec<f64> = tree
+        .par_chunks(CHUNK_NODES)
+        .map(|tree| {
             let mut sah = 0.0f64;
-            for (o, inner) in out.iter_mut().zip(tree) {
-                let mut node = Node::EMPTY;
-                for (k, (b, c)) in inner.children().iter().enumerate() {
-                    node.set_bounds(k, b);
-                    match *c {
-                        Child::Leaf { first, count } => {
-                            node.child[k] = LEAF_BIT | first;
-                            node.count[k] = count as u8;
-                            sah += (SAH_PRIM_COST * count as f32) as f64 * rel_area(b);
-                        }
-                        Child::Inner(i) => {
-                            node.child[k] = i;
-                            sah += SAH_NODE_COST as f64 * rel_area(b);
-                        }
+            for node in tree {
+                for k in 0..node.child.len() {
+                    let c = node.child[k];
+                    if c == EMPTY_CHILD {
+                        continue;
                     }
+                    let cost = if c & LEAF_BIT != 0 {
+                        SAH_PRIM_COST * node.count[k] as f32
+                    } else {
+                        SAH_NODE_COST
+                    };
+                    sah += cost as f64 * rel_area(node, k);
                 }
-                *o = node;
             }
             sah
         })
