@@ -31,6 +31,7 @@ use rayon::prelude::*;
 /// `View::parse_sections` accepted. `validate` is the rest of `View::parse` (ids, tree): the
 /// fast path checks the same as it goes, and anything else runs `validate` first, so that an
 /// invalid structure is reported as such before any other error.
+#[allow(clippy::too_many_arguments)] // the update's inputs, each used once
 pub(super) fn refit(
     bytes: &mut [u8],
     h: &Header,
