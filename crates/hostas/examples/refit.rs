@@ -252,6 +252,9 @@ fn main() {
         .collect();
     let mut times = Vec::new();
     let mut cpu = 0;
+    // One scratch for every update, as an application would keep it.
+    let mut scratch =
+        vec![0u8; hostas::layout::plan::update_scratch_size(idx.len() as u64) as usize];
     for r in 0..reps {
         let verts = if r % 2 == 0 { &moved } else { &p };
         let geom = [hostas::quick::triangle_mesh(
@@ -263,7 +266,6 @@ fn main() {
             primitive_count: idx.len() as u32,
             ..Default::default()
         }];
-        let mut scratch = vec![0u8; 4096];
         let info = hostas::BuildGeometryInfo {
             ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
             flags,
