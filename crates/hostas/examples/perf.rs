@@ -79,7 +79,8 @@ fn main() {
             primitive_count: idx.len() as u32,
             ..Default::default()
         }];
-        let mut scratch = vec![0u8; 4096];
+        let mut scratch =
+            vec![0u8; hostas::layout::plan::update_scratch_size(idx.len() as u64) as usize];
         let t = Instant::now();
         let info = hostas::BuildGeometryInfo {
             ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
