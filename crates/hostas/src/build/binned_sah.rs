@@ -532,23 +532,35 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     for (b, r) in boxes.iter_mut().zip(refs.iter()) {
         *b = B4::of(r);
     }
-    let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
-    for (k, order) in orders.0.iter().enumerate() {
-        let mut right_area = [0f32; SMALL];
-        let mut acc = B4::EMPTY;
-        for i in (1..n).rev() {
-            acc.grow(&boxes[order[i] as usize & (SMALL - 1)]);
-            right_area[i] = acc.half_area();
+    // The three axes are swept side by side: three independent chains of box growth
+    // instead of one after the other.
+    let o = &orders.0;
+    let mut right_area = [[0f32; SMALL]; 3];
+    let mut acc = [B4::EMPTY; 3];
+    for i in (1..n).rev() {
+        for k in 0..3 {
+            acc[k].grow(&boxes[o[k][i] as usize & (SMALL - 1)]);
+            right_area[k][i] = acc[k].half_area();
         }
-        let mut acc = B4::EMPTY;
-        for i in 1..n {
-            acc.grow(&boxes[order[i - 1] as usize & (SMALL - 1)]);
-            let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
+    }
+    let mut acc = [B4::EMPTY; 3];
+    // Per axis, the first position of least cost (a NaN or infinite cost never wins).
+    let mut best = [(f32::INFINITY, n / 2); 3];
+    for i in 1..n {
+        for k in 0..3 {
+            acc[k].grow(&boxes[o[k][i - 1] as usize & (SMALL - 1)]);
+            let cost = acc[k].half_area() * i as f32 + right_area[k][i] * (n - i) as f32;
             // Selects, not branches: which position wins is data, not pattern.
-            let better = cost < best_cost;
-            best_cost = if better { cost } else { best_cost };
-            best_axis = if better { k } else { best_axis };
-            best_mid = if better { i } else { best_mid };
+            let better = cost < best[k].0;
+            best[k].0 = if better { cost } else { best[k].0 };
+            best[k].1 = if better { i } else { best[k].1 };
+        }
+    }
+    // The first axis of least cost: the same winner as sweeping the axes in turn.
+    let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
+    for (k, &(cost, mid)) in best.iter().enumerate() {
+        if cost < best_cost {
+            (best_cost, best_axis, best_mid) = (cost, k, mid);
         }
     }
     // No finite cost (NaN bounds): split in the middle, in the current order.
