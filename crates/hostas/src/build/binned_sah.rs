@@ -381,6 +381,36 @@ fn parallel_partition(
     (total_left, l, r)
 }
 
+/// Stable partition through `aux` in one pass, given the size of the left side; `None` (with
+/// `refs` untouched) if `left` turns out not to be it.
+fn stable_partition(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    left: usize,
+    left_of: impl Fn(&PrimRef) -> bool,
+) -> Option<(usize, B4, B4)> {
+    let aux = &mut aux[..refs.len()];
+    // Centroid bounds of the right side, then the left, indexed by the side (see `partition`).
+    let mut storage = [B4::EMPTY; 2];
+    let acc = std::hint::black_box(&mut storage);
+    let (mut li, mut ri) = (0, left);
+    for r in refs.iter() {
+        let is_left = left_of(r);
+        acc[is_left as usize].grow_point(&B4::of(r).center2());
+        let at = if is_left { li } else { ri };
+        if let Some(d) = aux.get_mut(at) {
+            *d = *r;
+        }
+        li += is_left as usize;
+        ri += !is_left as usize;
+    }
+    if li != left {
+        return None;
+    }
+    refs.copy_from_slice(aux);
+    Some((left, storage[1], storage[0]))
+}
+
 /// Partitions `refs` in place into those with `bin(axis) < bin` first; returns the size of the
 /// left side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
 /// swap, bounds accumulated in an array indexed by the side): which side a primitive goes to is often a coin toss, and
@@ -417,9 +447,16 @@ fn binned_split_n<const N: usize>(
     let bins = bin_range::<N>(refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
     let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
-        parallel_partition(refs, aux, |r| {
-            binner.bin(r, axis, N as u32 - 1) < bin as u32
-        })
+        let left_of = |r: &PrimRef| binner.bin(r, axis, N as u32 - 1) < bin as u32;
+        // On one thread the bins' counts give the left side's size, so no counting pass.
+        // (Every stable partition is the same: the bytes do not depend on the path.)
+        let counted: u32 = bins.counts[axis][..bin].iter().sum();
+        let single = if rayon::current_num_threads() == 1 {
+            stable_partition(refs, aux, counted as usize, left_of)
+        } else {
+            None
+        };
+        single.unwrap_or_else(|| parallel_partition(refs, aux, left_of))
     } else {
         partition(refs, binner, axis, bin as u32, N as u32 - 1)
     };
