@@ -6,7 +6,7 @@ use super::binned_sah::RangeInfo;
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{Node, WIDTH};
-use crate::math::Aabb;
+use crate::math::{Aabb, fmax, fmin};
 use rayon::prelude::*;
 
 /// Spreads the low 10 bits of `v` to every third bit.
@@ -173,11 +173,21 @@ fn split_point(codes: &[u32], base: usize, top: &[u32]) -> usize {
 /// A leaf over `src` (at positions `base..`), copied into `dst`.
 #[inline(always)]
 fn leaf(src: &[PrimRef], dst: &mut [PrimRef], base: u32) -> (Aabb, Child) {
-    let mut b = Aabb::EMPTY;
+    // Four lanes at a time (lane 3 holds the id and is dropped): `minps`/`maxps`, with the
+    // operand order of `Aabb::union`.
+    let (mut lo, mut hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
     for (d, r) in dst.iter_mut().zip(src) {
         *d = *r;
-        b = b.union(&r.bounds());
+        let [rl, rh]: [[f32; 4]; 2] = bytemuck::cast(*r);
+        for k in 0..4 {
+            lo[k] = fmin(lo[k], rl[k]);
+            hi[k] = fmax(hi[k], rh[k]);
+        }
     }
+    let b = Aabb {
+        lo: [lo[0], lo[1], lo[2]],
+        hi: [hi[0], hi[1], hi[2]],
+    };
     let c = Child::Leaf {
         first: base,
         count: src.len() as u32,
@@ -204,14 +214,24 @@ fn build_child(
     }
     let mut parts = [(0usize, 0usize); WIDTH];
     parts[0] = (0, n);
-    for count in 1..WIDTH {
-        // Split the part with the most primitives (areas are not known top-down).
-        let Some(i) = (0..count)
-            .filter(|&i| parts[i].1 - parts[i].0 >= 2)
-            .max_by_key(|&i| (parts[i].1 - parts[i].0, usize::MAX - i))
-        else {
+    let mut live = 1;
+    while live < WIDTH {
+        // Split the part with the most primitives (areas are not known top-down), the first
+        // made among equals; parts of one primitive are never split (key 0).
+        let (mut i, mut best) = (0, 0);
+        for (j, &(b, e)) in parts[..live].iter().enumerate() {
+            let key = if e - b >= 2 {
+                (e - b) * WIDTH + (WIDTH - 1 - j)
+            } else {
+                0
+            };
+            if key > best {
+                (i, best) = (j, key);
+            }
+        }
+        if best == 0 {
             break;
-        };
+        }
         let (b, e) = parts[i];
         let mid = if depth < MEDIAN_DEPTH {
             split_point(&codes[b..e], base as usize + b, top)
@@ -220,12 +240,13 @@ fn build_child(
         };
         let mid = mid.clamp(1, e - b - 1);
         parts[i] = (b, b + mid);
-        parts[count] = (b + mid, e);
+        parts[live] = (b + mid, e);
+        live += 1;
     }
-    parts.sort_by_key(|&(b, e)| (e == b, b));
+    // Every part made is non-empty: in position order.
+    parts[..live].sort_unstable_by_key(|&(b, _)| b);
     let me = out.reserve();
     let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
-    let live = parts.iter().filter(|p| p.1 > p.0).count();
     // The parts cover `0..n` in order: hand each its piece of `dst`.
     let mut pieces: [(usize, usize, &mut [PrimRef]); WIDTH] = Default::default();
     let mut rest = dst;
