@@ -264,33 +264,42 @@ impl<const N: usize> Bins<N> {
     /// The best split plane: (axis, first bin of the right side, cost). Planes with an empty
     /// side cost NaN (an empty box's infinite area times a zero count) and never win.
     fn best(&self, binner: &Binner) -> Option<(usize, usize, f32)> {
-        let mut best: Option<(usize, usize, f32)> = None;
-        let mut best_cost = f32::INFINITY;
-        for k in 0..3 {
-            if binner.scale[k] == 0.0 {
-                continue;
-            }
-            let mut right_cost = [0f32; N];
-            let mut acc = B4::EMPTY;
-            let mut n = 0u32;
-            for i in (1..N).rev() {
-                acc.grow(&self.bounds[k][i]);
-                n += self.counts[k][i];
-                right_cost[i] = acc.half_area() * n as f32;
-            }
-            let mut acc = B4::EMPTY;
-            let mut n = 0u32;
-            for i in 1..N {
-                acc.grow(&self.bounds[k][i - 1]);
-                n += self.counts[k][i - 1];
-                let cost = acc.half_area() * n as f32 + right_cost[i];
-                if cost < best_cost {
-                    best_cost = cost;
-                    best = Some((k, i, cost));
-                }
+        // The three axes side by side (independent chains), each keeping its first plane of
+        // least cost with selects; then the first axis of least cost: the same winner as
+        // sweeping the axes in turn.
+        let mut right_cost = [[0f32; N]; 3];
+        let mut acc = [B4::EMPTY; 3];
+        let mut n = [0u32; 3];
+        for i in (1..N).rev() {
+            for k in 0..3 {
+                acc[k].grow(&self.bounds[k][i]);
+                n[k] += self.counts[k][i];
+                right_cost[k][i] = acc[k].half_area() * n[k] as f32;
             }
         }
-        best
+        let mut acc = [B4::EMPTY; 3];
+        let mut n = [0u32; 3];
+        let mut best = [(f32::INFINITY, 0usize); 3];
+        for i in 1..N {
+            for k in 0..3 {
+                acc[k].grow(&self.bounds[k][i - 1]);
+                n[k] += self.counts[k][i - 1];
+                let cost = acc[k].half_area() * n[k] as f32 + right_cost[k][i];
+                let better = cost < best[k].0;
+                best[k].0 = if better { cost } else { best[k].0 };
+                best[k].1 = if better { i } else { best[k].1 };
+            }
+        }
+        let mut pick: Option<(usize, usize, f32)> = None;
+        let mut best_cost = f32::INFINITY;
+        for (k, &(cost, i)) in best.iter().enumerate() {
+            // Axes without extent are never split on.
+            if binner.scale[k] != 0.0 && cost < best_cost {
+                best_cost = cost;
+                pick = Some((k, i, cost));
+            }
+        }
+        pick
     }
 
     /// Bounds of both sides of a plane.
