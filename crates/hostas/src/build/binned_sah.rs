@@ -1,8 +1,8 @@
 //! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
-//! child with the largest surface area. Primitive references are partitioned in place, so the
-//! final order is the order of `refs` on return. Small ranges are split with an exact SAH
-//! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
-//! sweep split hands its sides their orders.
+//! child with the largest surface area. Primitive references are partitioned in place (large
+//! ranges stably, through a second array), so the final order is the order of `refs` on
+//! return. Small ranges are split with an exact SAH sweep over sorted centroids instead of
+//! bins; their centroids are sorted once, and each sweep split hands its sides their orders.
 
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
