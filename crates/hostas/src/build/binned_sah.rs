@@ -1,8 +1,8 @@
 //! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
-//! child with the largest surface area. Primitive references are partitioned in place, so the
-//! final order is the order of `refs` on return. Small ranges are split with an exact SAH
-//! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
-//! sweep split hands its sides their orders.
+//! child with the largest surface area. Primitive references are partitioned in place (large
+//! ranges stably, through a second array), so the final order is the order of `refs` on
+//! return. Small ranges are split with an exact SAH sweep over sorted centroids instead of
+//! bins; their centroids are sorted once, and each sweep split hands its sides their orders.
 
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -264,33 +264,42 @@ impl<const N: usize> Bins<N> {
     /// The best split plane: (axis, first bin of the right side, cost). Planes with an empty
     /// side cost NaN (an empty box's infinite area times a zero count) and never win.
     fn best(&self, binner: &Binner) -> Option<(usize, usize, f32)> {
-        let mut best: Option<(usize, usize, f32)> = None;
-        let mut best_cost = f32::INFINITY;
-        for k in 0..3 {
-            if binner.scale[k] == 0.0 {
-                continue;
-            }
-            let mut right_cost = [0f32; N];
-            let mut acc = B4::EMPTY;
-            let mut n = 0u32;
-            for i in (1..N).rev() {
-                acc.grow(&self.bounds[k][i]);
-                n += self.counts[k][i];
-                right_cost[i] = acc.half_area() * n as f32;
-            }
-            let mut acc = B4::EMPTY;
-            let mut n = 0u32;
-            for i in 1..N {
-                acc.grow(&self.bounds[k][i - 1]);
-                n += self.counts[k][i - 1];
-                let cost = acc.half_area() * n as f32 + right_cost[i];
-                if cost < best_cost {
-                    best_cost = cost;
-                    best = Some((k, i, cost));
-                }
+        // The three axes side by side (independent chains), each keeping its first plane of
+        // least cost with selects; then the first axis of least cost: the same winner as
+        // sweeping the axes in turn.
+        let mut right_cost = [[0f32; N]; 3];
+        let mut acc = [B4::EMPTY; 3];
+        let mut n = [0u32; 3];
+        for i in (1..N).rev() {
+            for k in 0..3 {
+                acc[k].grow(&self.bounds[k][i]);
+                n[k] += self.counts[k][i];
+                right_cost[k][i] = acc[k].half_area() * n[k] as f32;
             }
         }
-        best
+        let mut acc = [B4::EMPTY; 3];
+        let mut n = [0u32; 3];
+        let mut best = [(f32::INFINITY, 0usize); 3];
+        for i in 1..N {
+            for k in 0..3 {
+                acc[k].grow(&self.bounds[k][i - 1]);
+                n[k] += self.counts[k][i - 1];
+                let cost = acc[k].half_area() * n[k] as f32 + right_cost[k][i];
+                let better = cost < best[k].0;
+                best[k].0 = if better { cost } else { best[k].0 };
+                best[k].1 = if better { i } else { best[k].1 };
+            }
+        }
+        let mut pick: Option<(usize, usize, f32)> = None;
+        let mut best_cost = f32::INFINITY;
+        for (k, &(cost, i)) in best.iter().enumerate() {
+            // Axes without extent are never split on.
+            if binner.scale[k] != 0.0 && cost < best_cost {
+                best_cost = cost;
+                pick = Some((k, i, cost));
+            }
+        }
+        pick
     }
 
     /// Bounds of both sides of a plane.
@@ -381,6 +390,36 @@ fn parallel_partition(
     (total_left, l, r)
 }
 
+/// Stable partition through `aux` in one pass, given the size of the left side; `None` (with
+/// `refs` untouched) if `left` turns out not to be it.
+fn stable_partition(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    left: usize,
+    left_of: impl Fn(&PrimRef) -> bool,
+) -> Option<(usize, B4, B4)> {
+    let aux = &mut aux[..refs.len()];
+    // Centroid bounds of the right side, then the left, indexed by the side (see `partition`).
+    let mut storage = [B4::EMPTY; 2];
+    let acc = std::hint::black_box(&mut storage);
+    let (mut li, mut ri) = (0, left);
+    for r in refs.iter() {
+        let is_left = left_of(r);
+        acc[is_left as usize].grow_point(&B4::of(r).center2());
+        let at = if is_left { li } else { ri };
+        if let Some(d) = aux.get_mut(at) {
+            *d = *r;
+        }
+        li += is_left as usize;
+        ri += !is_left as usize;
+    }
+    if li != left {
+        return None;
+    }
+    refs.copy_from_slice(aux);
+    Some((left, storage[1], storage[0]))
+}
+
 /// Partitions `refs` in place into those with `bin(axis) < bin` first; returns the size of the
 /// left side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
 /// swap, bounds accumulated in an array indexed by the side): which side a primitive goes to is often a coin toss, and
@@ -417,9 +456,16 @@ fn binned_split_n<const N: usize>(
     let bins = bin_range::<N>(refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
     let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
-        parallel_partition(refs, aux, |r| {
-            binner.bin(r, axis, N as u32 - 1) < bin as u32
-        })
+        let left_of = |r: &PrimRef| binner.bin(r, axis, N as u32 - 1) < bin as u32;
+        // On one thread the bins' counts give the left side's size, so no counting pass.
+        // (Every stable partition is the same: the bytes do not depend on the path.)
+        let counted: u32 = bins.counts[axis][..bin].iter().sum();
+        let single = if rayon::current_num_threads() == 1 {
+            stable_partition(refs, aux, counted as usize, left_of)
+        } else {
+            None
+        };
+        single.unwrap_or_else(|| parallel_partition(refs, aux, left_of))
     } else {
         partition(refs, binner, axis, bin as u32, N as u32 - 1)
     };
@@ -532,23 +578,35 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     for (b, r) in boxes.iter_mut().zip(refs.iter()) {
         *b = B4::of(r);
     }
-    let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
-    for (k, order) in orders.0.iter().enumerate() {
-        let mut right_area = [0f32; SMALL];
-        let mut acc = B4::EMPTY;
-        for i in (1..n).rev() {
-            acc.grow(&boxes[order[i] as usize & (SMALL - 1)]);
-            right_area[i] = acc.half_area();
+    // The three axes are swept side by side: three independent chains of box growth
+    // instead of one after the other.
+    let o = &orders.0;
+    let mut right_area = [[0f32; SMALL]; 3];
+    let mut acc = [B4::EMPTY; 3];
+    for i in (1..n).rev() {
+        for k in 0..3 {
+            acc[k].grow(&boxes[o[k][i] as usize & (SMALL - 1)]);
+            right_area[k][i] = acc[k].half_area();
         }
-        let mut acc = B4::EMPTY;
-        for i in 1..n {
-            acc.grow(&boxes[order[i - 1] as usize & (SMALL - 1)]);
-            let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
+    }
+    let mut acc = [B4::EMPTY; 3];
+    // Per axis, the first position of least cost (a NaN or infinite cost never wins).
+    let mut best = [(f32::INFINITY, n / 2); 3];
+    for i in 1..n {
+        for k in 0..3 {
+            acc[k].grow(&boxes[o[k][i - 1] as usize & (SMALL - 1)]);
+            let cost = acc[k].half_area() * i as f32 + right_area[k][i] * (n - i) as f32;
             // Selects, not branches: which position wins is data, not pattern.
-            let better = cost < best_cost;
-            best_cost = if better { cost } else { best_cost };
-            best_axis = if better { k } else { best_axis };
-            best_mid = if better { i } else { best_mid };
+            let better = cost < best[k].0;
+            best[k].0 = if better { cost } else { best[k].0 };
+            best[k].1 = if better { i } else { best[k].1 };
+        }
+    }
+    // The first axis of least cost: the same winner as sweeping the axes in turn.
+    let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
+    for (k, &(cost, mid)) in best.iter().enumerate() {
+        if cost < best_cost {
+            (best_cost, best_axis, best_mid) = (cost, k, mid);
         }
     }
     // No finite cost (NaN bounds): split in the middle, in the current order.
