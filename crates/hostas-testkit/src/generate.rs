@@ -19,23 +19,9 @@ fn v3(r: &mut Rand, scale: f32) -> [f32; 3] {
     ]
 }
 
-/// A random rotation-scale(-mirror)-translation.
-pub fn random_transform(r: &mut Rand, allow_mirror: bool) -> Affine {
-    // Random rotation from a random unit quaternion.
-    let q: [f32; 4] = loop {
-        let q = [
-            r.gen_range(-1.0f32..1.0),
-            r.gen_range(-1.0..1.0),
-            r.gen_range(-1.0..1.0),
-            r.gen_range(-1.0..1.0),
-        ];
-        let n = q.iter().map(|x| x * x).sum::<f32>().sqrt();
-        if n > 0.1 {
-            break q.map(|x| x / n);
-        }
-    };
-    let [w, x, y, z] = q;
-    let rot = [
+/// The rotation matrix of the unit quaternion `[w, x, y, z]` (rows).
+pub fn rotation([w, x, y, z]: [f32; 4]) -> [[f32; 3]; 3] {
+    [
         [
             1.0 - 2.0 * (y * y + z * z),
             2.0 * (x * y - z * w),
@@ -51,7 +37,25 @@ pub fn random_transform(r: &mut Rand, allow_mirror: bool) -> Affine {
             2.0 * (y * z + x * w),
             1.0 - 2.0 * (x * x + y * y),
         ],
-    ];
+    ]
+}
+
+/// A random rotation-scale(-mirror)-translation.
+pub fn random_transform(r: &mut Rand, allow_mirror: bool) -> Affine {
+    // Random rotation from a random unit quaternion.
+    let q: [f32; 4] = loop {
+        let q = [
+            r.gen_range(-1.0f32..1.0),
+            r.gen_range(-1.0..1.0),
+            r.gen_range(-1.0..1.0),
+            r.gen_range(-1.0..1.0),
+        ];
+        let n = q.iter().map(|x| x * x).sum::<f32>().sqrt();
+        if n > 0.1 {
+            break q.map(|x| x / n);
+        }
+    };
+    let rot = rotation([q[0], q[1], q[2], q[3]]);
     let mut s = [
         r.gen_range(0.3f32..3.0),
         r.gen_range(0.3..3.0),

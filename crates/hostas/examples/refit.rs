@@ -103,23 +103,7 @@ fn boxes(count: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
         );
         let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
         let (x, y, z, w) = (a * u2.sin(), a * u2.cos(), b * u3.sin(), b * u3.cos());
-        let m = [
-            [
-                1.0 - 2.0 * (y * y + z * z),
-                2.0 * (x * y - z * w),
-                2.0 * (x * z + y * w),
-            ],
-            [
-                2.0 * (x * y + z * w),
-                1.0 - 2.0 * (x * x + z * z),
-                2.0 * (y * z - x * w),
-            ],
-            [
-                2.0 * (x * z - y * w),
-                2.0 * (y * z + x * w),
-                1.0 - 2.0 * (x * x + y * y),
-            ],
-        ];
+        let m = hostas_testkit::generate::rotation([w, x, y, z]);
         let base = pos.len() as u32;
         for corner in 0..8u32 {
             let l = [0, 1, 2].map(|k| if corner >> k & 1 == 1 { h[k] } else { -h[k] });
