@@ -332,19 +332,14 @@ pub(super) fn descend(
     if mask == 0 {
         return None;
     }
-    if mask & (mask - 1) == 0 {
-        let k = mask.trailing_zeros() as usize;
-        return Some(Entry {
-            child: node.child[k],
-            count: node.count[k] as u32,
-            t: t[k],
-        });
-    }
     let entry = |k: usize| Entry {
         child: node.child[k],
         count: node.count[k] as u32,
         t: t[k],
     };
+    if mask & (mask - 1) == 0 {
+        return Some(entry(mask.trailing_zeros() as usize));
+    }
     let start = *sp;
     // Two children (the most common case after one): the farther is pushed, the nearer
     // returned, in the order the insertion sort below would give (on a tie, the later lane
