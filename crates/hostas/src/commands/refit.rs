@@ -1155,6 +1155,7 @@ mod tests {
     }
 
     /// A triangle geometry's buffers, vertices `stride` bytes apart.
+    #[derive(Clone)]
     struct Tris {
         verts: Vec<u8>,
         stride: usize,
@@ -1372,19 +1373,9 @@ mod tests {
         ] {
             // Large enough for the parallel split (some thousand nodes).
             let mut t = Tris::new(&mut r, 30000, stride, index);
-            let before = [t.geometry()];
             let ranges = tri_ranges(&[&t]);
-            let before_owned: Vec<u8> = t.verts.clone();
-            let _ = before;
+            let old = t.clone();
             t.jiggle(&mut r);
-            let old = Tris {
-                verts: before_owned,
-                stride,
-                index: t.index.clone(),
-                transform: None,
-                max_vertex: t.max_vertex,
-                count: t.count,
-            };
             // Index values change too (the CTS does that): swap two triangles' indices.
             if let Some((_, idx)) = &mut t.index {
                 let s = idx.len() / t.count as usize;
@@ -1414,19 +1405,7 @@ mod tests {
         a.vertex_mut(3)[..4].copy_from_slice(&nan);
         c.vertex_mut(30)[..4].copy_from_slice(&nan);
         let ranges = tri_ranges(&[&a, &b, &c]);
-        let old: Vec<Vec<u8>> = [&a, &b, &c].iter().map(|t| t.verts.clone()).collect();
-        let before: Vec<Tris> = [&a, &b, &c]
-            .iter()
-            .zip(old)
-            .map(|(t, verts)| Tris {
-                verts,
-                stride: t.stride,
-                index: t.index.clone(),
-                transform: t.transform.clone(),
-                max_vertex: t.max_vertex,
-                count: t.count,
-            })
-            .collect();
+        let before: Vec<Tris> = [&a, &b, &c].map(|t| t.clone()).to_vec();
         for t in [&mut a, &mut b, &mut c] {
             t.jiggle(&mut r);
         }
@@ -1450,14 +1429,7 @@ mod tests {
         .unwrap();
         // Errors: an inactive triangle made active (03663), active ones made inactive (03664)
         // in two places, an index past maxVertex; each reported as the general path does.
-        let mut c2 = Tris {
-            verts: c.verts.clone(),
-            stride: c.stride,
-            index: None,
-            transform: c.transform.clone(),
-            max_vertex: c.max_vertex,
-            count: c.count,
-        };
+        let mut c2 = c.clone();
         c2.vertex_mut(30)[..4].copy_from_slice(&1.0f32.to_le_bytes());
         let e = check(
             &geoms_before,
@@ -1467,11 +1439,7 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.contains("03663"), "{e}");
-        let mut a2 = Tris::new(&mut r, 1, 12, vk::IndexType::UINT32);
-        a2.verts = a.verts.clone();
-        a2.index = a.index.clone();
-        a2.max_vertex = a.max_vertex;
-        a2.count = a.count;
+        let mut a2 = a.clone();
         for v in [5usize, 4000] {
             a2.vertex_mut(v)[..4].copy_from_slice(&nan);
         }
@@ -1483,11 +1451,7 @@ mod tests {
         )
         .unwrap_err();
         assert!(e.contains("03664"), "{e}");
-        let mut b2 = Tris::new(&mut r, 1, 16, vk::IndexType::UINT16);
-        b2.verts = b.verts.clone();
-        b2.index = b.index.clone();
-        b2.max_vertex = b.max_vertex;
-        b2.count = b.count;
+        let mut b2 = b.clone();
         if let Some((_, idx)) = &mut b2.index {
             idx[600..602].copy_from_slice(&u16::MAX.to_le_bytes());
             idx[60..62].copy_from_slice(&u16::MAX.to_le_bytes());
@@ -1677,14 +1641,7 @@ mod tests {
             // Random triangles: leaf order is unrelated to primitive order.
             let t = Tris::new(&mut r, 300_000, 12, index);
             let ranges = tri_ranges(&[&t]);
-            let mut moved = Tris {
-                verts: t.verts.clone(),
-                stride: 12,
-                index: t.index.clone(),
-                transform: None,
-                max_vertex: t.max_vertex,
-                count: t.count,
-            };
+            let mut moved = t.clone();
             moved.jiggle(&mut r);
             // (The path is taken: the built tree's ids are scattered.)
             let device = Device::new();
