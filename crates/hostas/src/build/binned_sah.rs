@@ -930,17 +930,21 @@ mod tests {
         assert_eq!(ids, after);
     }
 
-    /// Small ranges go through the sorted sweep, with orders handed from split to split:
-    /// random boxes, identical centroids, ties on one axis, every size up to a few nodes.
-    #[test]
-    fn small_ranges_make_valid_trees() {
-        let mut seed = 12345u32;
-        let mut rnd = move || {
+    /// Uniform numbers in [0, 1] from a 32-bit xorshift.
+    fn xorshift(mut seed: u32) -> impl FnMut() -> f32 {
+        move || {
             seed ^= seed << 13;
             seed ^= seed >> 17;
             seed ^= seed << 5;
             seed as f32 / u32::MAX as f32
-        };
+        }
+    }
+
+    /// Small ranges go through the sorted sweep, with orders handed from split to split:
+    /// random boxes, identical centroids, ties on one axis, every size up to a few nodes.
+    #[test]
+    fn small_ranges_make_valid_trees() {
+        let mut rnd = xorshift(12345u32);
         for n in 1..80usize {
             let random: Vec<Aabb> = (0..n)
                 .map(|_| {
@@ -974,13 +978,7 @@ mod tests {
     /// centroids, so no ties to break differently).
     #[test]
     fn sweep_hands_down_the_sides_orders() {
-        let mut seed = 777u32;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            seed as f32 / u32::MAX as f32
-        };
+        let mut rnd = xorshift(777u32);
         for n in 3..=SMALL {
             for _ in 0..50 {
                 let mut refs = refs_of((0..n).map(|_| {

@@ -28,8 +28,8 @@ pub struct HeaderFields {
 pub const SAH_NODE_COST: f32 = 1.0;
 pub const SAH_PRIM_COST: f32 = 1.0;
 
-/// The node section of `dst` (the whole structure range), for the builders to write into.
-pub fn node_section<'a>(dst: &'a mut [u8], plan: &Plan) -> Result<&'a mut [Node]> {
+/// `dst` (the whole structure range) holds everything `plan` lays out.
+fn fits(dst: &[u8], plan: &Plan) -> Result<()> {
     if (dst.len() as u64) < plan.total_size {
         return Err(Error::RangeTooShort {
             what: "acceleration structure",
@@ -38,6 +38,12 @@ pub fn node_section<'a>(dst: &'a mut [u8], plan: &Plan) -> Result<&'a mut [Node]
             location: Default::default(),
         });
     }
+    Ok(())
+}
+
+/// The node section of `dst` (the whole structure range), for the builders to write into.
+pub fn node_section<'a>(dst: &'a mut [u8], plan: &Plan) -> Result<&'a mut [Node]> {
+    fits(dst, plan)?;
     bytemuck::try_cast_slice_mut(
         &mut dst[plan.nodes_offset as usize
             ..(plan.nodes_offset + super::NODE_SIZE * plan.node_capacity) as usize],
@@ -58,14 +64,7 @@ pub fn encode(
     geometries: &[GeometryRecord],
     tree: &Tree,
 ) -> Result<Header> {
-    if (dst.len() as u64) < plan.total_size {
-        return Err(Error::RangeTooShort {
-            what: "acceleration structure",
-            needed: plan.total_size,
-            available: dst.len() as u64,
-            location: Default::default(),
-        });
-    }
+    fits(dst, plan)?;
     let allocated_size = dst.len() as u64;
     let g_bytes = &mut dst[plan.geometries_offset as usize
         ..plan.geometries_offset as usize
