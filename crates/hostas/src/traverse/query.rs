@@ -17,6 +17,7 @@ use crate::layout::{
 };
 use crate::math::{Affine, Vec3, fmax, fmin};
 use ash::vk;
+use wide::f32x8;
 
 /// `RayQueryCommittedIntersectionTypeKHR`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -190,7 +191,7 @@ impl BoxRay {
 
     /// Entry distances of the children of `node` and the mask of those the segment
     /// `[t_min, t_max]` reaches (inclusive at both ends). Empty slots have inverted boxes and
-    /// never hit.
+    /// never hit. All eight slabs at once (`wide`: AVX, or two SSE halves).
     #[inline(always)]
     pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
         let (nx, fx) = if self.neg[0] {
@@ -208,30 +209,26 @@ impl BoxRay {
         } else {
             (&n.lo_z, &n.hi_z)
         };
-        let [ox, oy, oz] = self.origin;
-        let [ix, iy, iz] = self.inv;
-        let [jx, jy, jz] = self.inv_far;
-        let mut near = [0.0; WIDTH];
-        let mut hit = [false; WIDTH];
-        for k in 0..WIDTH {
-            // `fmax(a, b)` and `fmin(a, b)` return `b` when `a` is NaN: each axis term goes
-            // first, so a NaN from a ray in a slab plane leaves the interval unbounded there.
-            near[k] = fmax(
-                (nx[k] - ox) * ix,
-                fmax((ny[k] - oy) * iy, fmax((nz[k] - oz) * iz, t_min)),
-            );
-            let far = fmin(
-                (fx[k] - ox) * jx,
-                fmin((fy[k] - oy) * jy, fmin((fz[k] - oz) * jz, t_max)),
-            );
-            // A ray parallel to a slab it is outside of enters at +inf: a miss.
-            hit[k] = near[k] <= far && near[k] < f32::INFINITY;
-        }
-        let mut mask = 0u32;
-        for (k, h) in hit.iter().enumerate() {
-            mask |= (*h as u32) << k;
-        }
-        (mask, near)
+        let v = |a: &[f32; WIDTH]| f32x8::from(*a);
+        let s = f32x8::splat;
+        let [ox, oy, oz] = self.origin.map(s);
+        let [ix, iy, iz] = self.inv.map(s);
+        let [jx, jy, jz] = self.inv_far.map(s);
+        // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval
+        // unbounded on that axis (`max_or`). Capping the far end at f32::MAX also rejects a
+        // ray parallel to a slab it is outside of, which enters at +inf.
+        let near = max_or(
+            (v(nx) - ox) * ix,
+            max_or((v(ny) - oy) * iy, max_or((v(nz) - oz) * iz, s(t_min))),
+        );
+        let far = min_or(
+            (v(fx) - ox) * jx,
+            min_or(
+                (v(fy) - oy) * jy,
+                min_or((v(fz) - oz) * jz, s(fmin(t_max, f32::MAX))),
+            ),
+        );
+        (near.simd_le(far).to_bitmask(), near.to_array())
     }
 
     #[inline(always)]
@@ -313,6 +310,27 @@ impl<'s> Level<'s> {
         }
         false
     }
+}
+
+const _: () = assert!(WIDTH == 8, "the node test is written for f32x8");
+
+/// Lanewise `max(term, acc)` that returns `acc` where `term` is NaN (`acc` never is).
+/// `maxps` does exactly that; elsewhere `max` returns the operand that is not NaN.
+#[inline(always)]
+fn max_or(term: f32x8, acc: f32x8) -> f32x8 {
+    #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+    return term.fast_max(acc);
+    #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+    return term.max(acc);
+}
+
+/// Lanewise `min(term, acc)` that returns `acc` where `term` is NaN; see [`max_or`].
+#[inline(always)]
+fn min_or(term: f32x8, acc: f32x8) -> f32x8 {
+    #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+    return term.fast_min(acc);
+    #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+    return term.min(acc);
 }
 
 /// Tests the children of node `index`: returns the nearest one the segment reaches, having
