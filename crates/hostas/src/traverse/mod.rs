@@ -81,7 +81,44 @@ impl Ray {
     }
 
     /// The runtime rules of `OpRayQueryInitializeKHR` (VUID-RuntimeSpirv-OpRayQueryInitializeKHR-*).
+    #[inline(always)]
     pub fn validate(&self) -> Result<()> {
+        // Every ray is checked, so the check is one branch; the error is worked out apart.
+        if self.plainly_valid() {
+            Ok(())
+        } else {
+            self.first_broken_rule()
+        }
+    }
+
+    /// All the rules of [`Ray::validate`] at once, without branches.
+    #[inline(always)]
+    fn plainly_valid(&self) -> bool {
+        let [o, d] = [self.origin, self.direction];
+        let finite =
+            (o[0] * 0.0 + o[1] * 0.0 + o[2] * 0.0) + (d[0] * 0.0 + d[1] * 0.0 + d[2] * 0.0) == 0.0;
+        // False when either is NaN.
+        let range = (0.0 <= self.t_min) & (self.t_min <= self.t_max);
+        let f = self.flags.0;
+        let skip = RayFlags::SKIP_TRIANGLES.0 | RayFlags::SKIP_AABBS.0;
+        let cull = f & Self::CULL_RULE;
+        let opacity = f & Self::OPACITY_RULE;
+        let at_most_one = |m: u32| m & m.wrapping_sub(1) == 0;
+        finite & range & (f & skip != skip) & at_most_one(cull) & at_most_one(opacity)
+    }
+
+    const CULL_RULE: u32 = RayFlags::SKIP_TRIANGLES.0
+        | RayFlags::CULL_BACK_FACING_TRIANGLES.0
+        | RayFlags::CULL_FRONT_FACING_TRIANGLES.0;
+    const OPACITY_RULE: u32 = RayFlags::OPAQUE.0
+        | RayFlags::NO_OPAQUE.0
+        | RayFlags::CULL_OPAQUE.0
+        | RayFlags::CULL_NO_OPAQUE.0;
+
+    /// The first rule of [`Ray::validate`] the ray breaks, as an error.
+    #[cold]
+    #[inline(never)]
+    fn first_broken_rule(&self) -> Result<()> {
         let bad = |vuid: &'static str, msg: &str| Err(Error::vuid(vuid, Location::NONE, msg));
         // `x * 0` is 0 for every finite `x` and NaN for infinities and NaN.
         let [o, d] = [self.origin, self.direction];
@@ -117,25 +154,69 @@ impl Ray {
                 "SkipTriangles and SkipAABBs must not both be set",
             );
         }
-        let cull = RayFlags::SKIP_TRIANGLES.0
-            | RayFlags::CULL_BACK_FACING_TRIANGLES.0
-            | RayFlags::CULL_FRONT_FACING_TRIANGLES.0;
-        if (f.0 & cull).count_ones() > 1 {
+        if (f.0 & Self::CULL_RULE).count_ones() > 1 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06890",
                 "at most one of SkipTriangles, CullBackFacingTriangles and CullFrontFacingTriangles may be set",
             );
         }
-        let opacity = RayFlags::OPAQUE.0
-            | RayFlags::NO_OPAQUE.0
-            | RayFlags::CULL_OPAQUE.0
-            | RayFlags::CULL_NO_OPAQUE.0;
-        if (f.0 & opacity).count_ones() > 1 {
+        if (f.0 & Self::OPACITY_RULE).count_ones() > 1 {
             return bad(
                 "VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06891",
                 "at most one of Opaque, NoOpaque, CullOpaque and CullNoOpaque may be set",
             );
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The one-branch check and the rule-by-rule check agree on every flag combination and
+    /// on origins, directions and ranges at the edges of each rule.
+    #[test]
+    fn fast_validation_agrees_with_the_rules() {
+        let (inf, nan) = (f32::INFINITY, f32::NAN);
+        let vectors = [
+            [0.0, 1.0, -2.0],
+            [inf, 0.0, 0.0],
+            [0.0, -inf, 0.0],
+            [0.0, 0.0, nan],
+        ];
+        let ranges = [
+            (0.0, inf),
+            (0.0, 0.0),
+            (1.0, 0.5),
+            (-0.0, 1.0),
+            (-1.0, 1.0),
+            (0.0, -1.0),
+            (nan, 1.0),
+            (0.0, nan),
+            (inf, inf),
+        ];
+        let mut rejected = 0;
+        for f in 0..0x800u32 {
+            for o in vectors {
+                for d in vectors {
+                    for (t_min, t_max) in ranges {
+                        let ray = Ray {
+                            origin: o,
+                            direction: d,
+                            t_min,
+                            t_max,
+                            flags: RayFlags(f),
+                            cull_mask: 0xff,
+                        };
+                        let slow = ray.first_broken_rule().is_ok();
+                        assert_eq!(ray.plainly_valid(), slow, "{ray:?}");
+                        assert_eq!(ray.validate().is_ok(), slow);
+                        rejected += usize::from(!slow);
+                    }
+                }
+            }
+        }
+        assert!(rejected > 0);
     }
 }

@@ -110,6 +110,8 @@ impl<'s> Tracer<'s> {
         };
         let world = BoxRay::new(ray.origin, ray.direction);
         let mut world_sheared: Option<ShearedRay> = None;
+        // The ray in the space of the current instance, when it is not the world's.
+        let mut object: Option<(BoxRay, ShearedRay)> = None;
         // Disjoint borrows of the tracer's parts (the stack is borrowed for the whole trace).
         let stack = &mut self.stack[..];
         let mut sp = 0;
@@ -154,15 +156,17 @@ impl<'s> Tracer<'s> {
                     if skip || view.nodes.is_empty() {
                         continue;
                     }
-                    // An identity instance sees the world ray: no transform, no new inverses.
+                    // An identity instance sees the world ray: no transform, no new inverses,
+                    // nothing copied.
                     let local = if inst.hints & INSTANCE_IDENTITY != 0 {
-                        let sheared = *world_sheared
+                        let sheared = &*world_sheared
                             .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
-                        (world, sheared)
+                        (&world, sheared)
                     } else {
                         let w2o = Affine::from_rows(inst.world_to_object);
                         let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
-                        (BoxRay::new(o, d), ShearedRay::new(o, d))
+                        let moved = object.insert((BoxRay::new(o, d), ShearedRay::new(o, d)));
+                        (&moved.0, &moved.1)
                     };
                     let at = BlasAt {
                         view,
@@ -171,12 +175,12 @@ impl<'s> Tracer<'s> {
                         blas: bi,
                     };
                     let found = match local.1.perm {
-                        0 => trace_blas::<0>(stack, sp, &at, &local, ray, &mut best, first_hit),
-                        1 => trace_blas::<1>(stack, sp, &at, &local, ray, &mut best, first_hit),
-                        2 => trace_blas::<2>(stack, sp, &at, &local, ray, &mut best, first_hit),
-                        3 => trace_blas::<3>(stack, sp, &at, &local, ray, &mut best, first_hit),
-                        4 => trace_blas::<4>(stack, sp, &at, &local, ray, &mut best, first_hit),
-                        _ => trace_blas::<5>(stack, sp, &at, &local, ray, &mut best, first_hit),
+                        0 => trace_blas::<0>(stack, sp, &at, local, ray, &mut best, first_hit),
+                        1 => trace_blas::<1>(stack, sp, &at, local, ray, &mut best, first_hit),
+                        2 => trace_blas::<2>(stack, sp, &at, local, ray, &mut best, first_hit),
+                        3 => trace_blas::<3>(stack, sp, &at, local, ray, &mut best, first_hit),
+                        4 => trace_blas::<4>(stack, sp, &at, local, ray, &mut best, first_hit),
+                        _ => trace_blas::<5>(stack, sp, &at, local, ray, &mut best, first_hit),
                     };
                     if found && first_hit {
                         break 'top;
@@ -240,7 +244,7 @@ fn trace_blas<const P: usize>(
     stack: &mut [Entry],
     base: usize,
     at: &BlasAt,
-    local: &(BoxRay, ShearedRay),
+    local: (&BoxRay, &ShearedRay),
     ray: &Ray,
     best: &mut Best,
     first_hit: bool,
@@ -251,7 +255,7 @@ fn trace_blas<const P: usize>(
         slot,
         blas,
     } = *at;
-    let (boxes, sheared) = (&local.0, &local.1);
+    let (boxes, sheared) = local;
     let flags = ray.flags;
     let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
     let flip = iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING);
