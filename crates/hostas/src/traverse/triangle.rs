@@ -122,19 +122,21 @@ impl ShearedRay {
         // (whether a ray covers a triangle is data-dependent; mispredictions cost more than
         // the extra comparisons).
         if (u == 0.0) | (v == 0.0) | (w == 0.0) {
-            return self.on_edge(&s);
+            return self.on_edge(s);
         }
         if ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0)) {
             return None;
         }
-        self.hit(&s, u, v, w)
+        self.hit(&s.z, u, v, w)
     }
 
     /// The rare case of an edge function that is zero in f32: recomputed exactly, and when it
     /// is exactly zero the point is on the edge and the top-left rule decides.
+    /// Takes the sheared triangle by value: by reference, every test would have to store it
+    /// to memory for this rare call.
     #[cold]
     #[inline(never)]
-    fn on_edge(&self, s: &Sheared) -> Option<TriangleHit> {
+    fn on_edge(&self, s: Sheared) -> Option<TriangleHit> {
         let [ax, bx, cx] = s.x.map(f64::from);
         let [ay, by, cy] = s.y.map(f64::from);
         let exact = [cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax];
@@ -170,17 +172,17 @@ impl ShearedRay {
         if w == 0.0 && !owns(bx - ax, by - ay) {
             return None;
         }
-        self.hit(s, u, v, w)
+        self.hit(&s.z, u, v, w)
     }
 
     /// The hit of a ray inside the triangle with edge functions `u, v, w`.
     #[inline(always)]
-    fn hit(&self, s: &Sheared, u: f32, v: f32, w: f32) -> Option<TriangleHit> {
+    fn hit(&self, z: &[f32; 3], u: f32, v: f32, w: f32) -> Option<TriangleHit> {
         let det = u + v + w;
         if det == 0.0 {
             return None;
         }
-        let [az, bz, cz] = [self.sz * s.z[0], self.sz * s.z[1], self.sz * s.z[2]];
+        let [az, bz, cz] = z.map(|z| self.sz * z);
         let t_scaled = u * az + v * bz + w * cz;
         let t = t_scaled / det; // one rounding, not two: the spec asks for as much precision as possible
         if t.is_nan() {
