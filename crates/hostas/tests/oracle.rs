@@ -280,6 +280,36 @@ fn oracle_instance(_o: &Oracle, id: u32) -> (u32, u32) {
 fn run(seed: u64, prims: usize, adversarial: bool, rays: usize) -> Result<(), TestCaseError> {
     let mut r = generate::rng(seed);
     let desc = generate::random_scene(&mut r, prims, adversarial);
+    run_desc(seed, desc, rays, &mut r)
+}
+
+/// A random bottom level under a top level of one identity instance (random mask, flags and
+/// ids): the batch tracer goes straight to that instance, the ray query through the top level.
+fn run_single(
+    seed: u64,
+    prims: usize,
+    adversarial: bool,
+    rays: usize,
+) -> Result<(), TestCaseError> {
+    let mut r = generate::rng(seed);
+    let mut desc = generate::random_scene(&mut r, prims, adversarial);
+    desc.blases.truncate(1);
+    let mut only = hostas_testkit::InstanceDesc::identity(0);
+    only.custom_index = r.gen_range(0..1 << 24);
+    only.sbt_record_offset = r.gen_range(0..1 << 24);
+    only.mask = if r.gen_bool(0.8) { 0xff } else { r.r#gen() };
+    // Any of the four instance flags, but not FORCE_OPAQUE with FORCE_NO_OPAQUE (invalid).
+    let flags = r.gen_range(0..16u32);
+    only.flags = vk::GeometryInstanceFlagsKHR::from_raw(if flags & 0xc == 0xc {
+        flags & !0x8
+    } else {
+        flags
+    });
+    desc.instances = vec![only];
+    run_desc(seed, desc, rays, &mut r)
+}
+
+fn run_desc(seed: u64, desc: SceneDesc, rays: usize, r: &mut Rand) -> Result<(), TestCaseError> {
     CURRENT.with(|c| {
         *c.borrow_mut() = desc
             .instances
@@ -287,7 +317,7 @@ fn run(seed: u64, prims: usize, adversarial: bool, rays: usize) -> Result<(), Te
             .map(|i| (i.custom_index, i.sbt_record_offset))
             .collect()
     });
-    check_scene(seed, &desc, rays, &mut r)
+    check_scene(seed, &desc, rays, r)
 }
 
 proptest! {
@@ -301,6 +331,11 @@ proptest! {
     #[test]
     fn adversarial_scenes_match_oracle(seed in any::<u64>()) {
         run(seed, 60, true, 60)?;
+    }
+
+    #[test]
+    fn single_identity_instance_scenes_match_oracle(seed in any::<u64>()) {
+        run_single(seed, 60, seed % 2 == 1, 60)?;
     }
 }
 

@@ -28,6 +28,9 @@ pub struct Tracer<'s> {
     /// The bottom-level view used last (consecutive instances often share one).
     cached: Option<(u32, View<'s>)>,
     stack: Vec<Entry>,
+    /// The slot of the top level's only instance, when it is the identity: the ray then goes
+    /// straight to that instance's bottom level.
+    single: Option<u32>,
 }
 
 impl Drop for Tracer<'_> {
@@ -61,11 +64,20 @@ impl<'s> Tracer<'s> {
     pub fn new(scene: &'s Scene) -> Tracer<'s> {
         let mut stack = STACKS.with(|p| p.borrow_mut().pop()).unwrap_or_default();
         stack.resize(TRACER_STACK, Entry::default());
+        let tlas = scene.tlas_view();
+        let single = tlas
+            .and_then(|t| match t.instances {
+                [only] => Some(only.hints & INSTANCE_IDENTITY != 0),
+                _ => None,
+            })
+            .filter(|&identity| identity)
+            .map(|_| 0);
         Tracer {
             scene,
-            tlas: scene.tlas_view(),
+            tlas,
             cached: None,
             stack,
+            single,
         }
     }
 
@@ -98,7 +110,6 @@ impl<'s> Tracer<'s> {
         if tlas.nodes.is_empty() {
             return Ok(Hit::MISS);
         }
-        let flags = ray.flags;
         let mut best = Best {
             t: ray.t_max,
             kind: HitKind::Miss,
@@ -108,88 +119,59 @@ impl<'s> Tracer<'s> {
             barycentrics: [0.0; 2],
             front_face: false,
         };
-        let world = BoxRay::new(ray.origin, ray.direction);
-        let mut world_sheared: Option<ShearedRay> = None;
-        // The ray in the space of the current instance, when it is not the world's.
-        let mut object: Option<(BoxRay, ShearedRay)> = None;
+        let mut world = World {
+            ray,
+            boxes: BoxRay::new(ray.origin, ray.direction),
+            sheared: None,
+            object: None,
+        };
         // Disjoint borrows of the tracer's parts (the stack is borrowed for the whole trace).
         let stack = &mut self.stack[..];
-        let mut sp = 0;
-        let mut cur = Entry {
-            child: 0,
-            count: 0,
-            t: f32::NEG_INFINITY,
-        };
-        'top: loop {
-            if cur.child & LEAF_BIT == 0 {
-                if let Some(next) = descend(
-                    stack, &mut sp, tlas.nodes, cur.child, &world, ray.t_min, best.t,
-                ) {
-                    cur = next;
-                    continue;
-                }
-            } else {
-                let first = cur.child & !LEAF_BIT;
-                for slot in first..first + cur.count {
-                    let Some(inst) = tlas.instances.get(slot as usize) else {
-                        continue;
-                    };
-                    if inst.mask & ray.cull_mask & 0xff == 0 {
-                        continue;
-                    }
-                    let Some(bi) = self.scene.instance_blas_index(slot) else {
-                        continue;
-                    };
-                    // By reference into the cache: a view is a dozen slices, not worth copying
-                    // per instance.
-                    if self.cached.as_ref().is_none_or(|(i, _)| *i != bi) {
-                        self.cached = self.scene.blas_view(bi).map(|v| (bi, v));
-                    }
-                    let Some((_, view)) = &self.cached else {
-                        continue;
-                    };
-                    let skip = match view.prim_kind {
-                        PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
-                        PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
-                        _ => true,
-                    };
-                    if skip || view.nodes.is_empty() {
+        let scene = self.scene;
+        let cached = &mut self.cached;
+        if let Some(slot) = self.single {
+            // The top level's only box is this instance's, and the bottom level's root test
+            // covers it: the top-level traversal would only add its cost.
+            enter(
+                scene, cached, &tlas, &mut world, slot, stack, 0, &mut best, first_hit,
+            );
+        } else {
+            let mut sp = 0;
+            let mut cur = Entry {
+                child: 0,
+                count: 0,
+                t: f32::NEG_INFINITY,
+            };
+            'top: loop {
+                if cur.child & LEAF_BIT == 0 {
+                    if let Some(next) = descend(
+                        stack,
+                        &mut sp,
+                        tlas.nodes,
+                        cur.child,
+                        &world.boxes,
+                        ray.t_min,
+                        best.t,
+                    ) {
+                        cur = next;
                         continue;
                     }
-                    // An identity instance sees the world ray: no transform, no new inverses,
-                    // nothing copied.
-                    let local = if inst.hints & INSTANCE_IDENTITY != 0 {
-                        let sheared = &*world_sheared
-                            .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
-                        (&world, sheared)
-                    } else {
-                        let w2o = Affine::from_rows(inst.world_to_object);
-                        let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
-                        let moved = object.insert((BoxRay::new(o, d), ShearedRay::new(o, d)));
-                        (&moved.0, &moved.1)
-                    };
-                    let at = BlasAt {
-                        view,
-                        inst,
-                        slot,
-                        blas: bi,
-                    };
-                    let found = match local.1.perm {
-                        0 => trace_blas::<0>(stack, sp, &at, local, ray, &mut best, first_hit),
-                        1 => trace_blas::<1>(stack, sp, &at, local, ray, &mut best, first_hit),
-                        2 => trace_blas::<2>(stack, sp, &at, local, ray, &mut best, first_hit),
-                        3 => trace_blas::<3>(stack, sp, &at, local, ray, &mut best, first_hit),
-                        4 => trace_blas::<4>(stack, sp, &at, local, ray, &mut best, first_hit),
-                        _ => trace_blas::<5>(stack, sp, &at, local, ray, &mut best, first_hit),
-                    };
-                    if found && first_hit {
-                        break 'top;
+                } else {
+                    let first = cur.child & !LEAF_BIT;
+                    for slot in first..first + cur.count {
+                        let world = &mut world;
+                        let found = enter(
+                            scene, cached, &tlas, world, slot, stack, sp, &mut best, first_hit,
+                        );
+                        if found && first_hit {
+                            break 'top;
+                        }
                     }
                 }
-            }
-            match pop(stack, &mut sp, 0, best.t) {
-                Some(e) => cur = e,
-                None => break,
+                match pop(stack, &mut sp, 0, best.t) {
+                    Some(e) => cur = e,
+                    None => break,
+                }
             }
         }
         if best.kind == HitKind::Miss {
@@ -211,6 +193,86 @@ impl<'s> Tracer<'s> {
             barycentrics: best.barycentrics,
             front_face: best.front_face,
         })
+    }
+}
+
+/// The ray in world space and, made when first needed, in the current instance's space.
+struct World<'r> {
+    ray: &'r Ray,
+    boxes: BoxRay,
+    /// The world ray prepared for triangles, made at the first identity instance.
+    sheared: Option<ShearedRay>,
+    /// The ray in the space of the current instance, when it is not the world's.
+    object: Option<(BoxRay, ShearedRay)>,
+}
+
+/// Traverses the bottom level of instance `slot` on top of `stack` (entries above `sp`) when
+/// the ray's mask and flags let it in, updating `best`. Returns whether it accepted a hit.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn enter<'s>(
+    scene: &'s Scene,
+    cached: &mut Option<(u32, View<'s>)>,
+    tlas: &View<'s>,
+    world: &mut World,
+    slot: u32,
+    stack: &mut [Entry],
+    sp: usize,
+    best: &mut Best,
+    first_hit: bool,
+) -> bool {
+    let ray = world.ray;
+    let Some(inst) = tlas.instances.get(slot as usize) else {
+        return false;
+    };
+    if inst.mask & ray.cull_mask & 0xff == 0 {
+        return false;
+    }
+    let Some(bi) = scene.instance_blas_index(slot) else {
+        return false;
+    };
+    // By reference into the cache: a view is a dozen slices, not worth copying per instance.
+    if cached.as_ref().is_none_or(|(i, _)| *i != bi) {
+        *cached = scene.blas_view(bi).map(|v| (bi, v));
+    }
+    let Some((_, view)) = cached else {
+        return false;
+    };
+    let skip = match view.prim_kind {
+        PrimKind::Triangles => ray.flags.contains(RayFlags::SKIP_TRIANGLES),
+        PrimKind::Aabbs => ray.flags.contains(RayFlags::SKIP_AABBS),
+        _ => true,
+    };
+    if skip || view.nodes.is_empty() {
+        return false;
+    }
+    // An identity instance sees the world ray: no transform, no new inverses, nothing copied.
+    let local = if inst.hints & INSTANCE_IDENTITY != 0 {
+        let sheared = &*world
+            .sheared
+            .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
+        (&world.boxes, sheared)
+    } else {
+        let w2o = Affine::from_rows(inst.world_to_object);
+        let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
+        let moved = world
+            .object
+            .insert((BoxRay::new(o, d), ShearedRay::new(o, d)));
+        (&moved.0, &moved.1)
+    };
+    let at = BlasAt {
+        view,
+        inst,
+        slot,
+        blas: bi,
+    };
+    match local.1.perm {
+        0 => trace_blas::<0>(stack, sp, &at, local, ray, best, first_hit),
+        1 => trace_blas::<1>(stack, sp, &at, local, ray, best, first_hit),
+        2 => trace_blas::<2>(stack, sp, &at, local, ray, best, first_hit),
+        3 => trace_blas::<3>(stack, sp, &at, local, ray, best, first_hit),
+        4 => trace_blas::<4>(stack, sp, &at, local, ray, best, first_hit),
+        _ => trace_blas::<5>(stack, sp, &at, local, ray, best, first_hit),
     }
 }
 
