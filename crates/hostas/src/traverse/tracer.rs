@@ -248,9 +248,10 @@ fn enter<'s>(
     }
     // An identity instance sees the world ray: no transform, no new inverses, nothing copied.
     let local = if inst.hints & INSTANCE_IDENTITY != 0 {
-        let sheared = &*world
-            .sheared
-            .get_or_insert_with(|| ShearedRay::new(ray.origin, ray.direction));
+        let sheared = match &mut world.sheared {
+            Some(s) => &*s,
+            none => &*none.insert(ShearedRay::new(ray.origin, ray.direction)),
+        };
         (&world.boxes, sheared)
     } else {
         let w2o = Affine::from_rows(inst.world_to_object);

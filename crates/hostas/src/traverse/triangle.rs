@@ -55,6 +55,7 @@ struct Sheared {
 }
 
 impl ShearedRay {
+    #[inline(always)]
     pub fn new(origin: Vec3, dir: Vec3) -> ShearedRay {
         let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
         let kz = if a[0] >= a[1] && a[0] >= a[2] {
