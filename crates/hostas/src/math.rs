@@ -16,6 +16,37 @@ pub fn fmax(a: f32, b: f32) -> f32 {
     if a > b { a } else { b }
 }
 
+/// Lane-by-lane [`fmin`] and [`fmax`] over `wide` vectors, with their exact semantics (NaN and
+/// signed zeros included), so that vector and scalar code compute the same bits: on x86 they
+/// are `minps`/`maxps`, which return the second operand unless the first is strictly
+/// smaller/larger; elsewhere they go lane by lane.
+macro_rules! lanewise_min_max {
+    ($min:ident, $max:ident, $t:ty) => {
+        #[inline(always)]
+        pub fn $min(a: $t, b: $t) -> $t {
+            #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+            return a.fast_min(b);
+            #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+            {
+                let (a, b) = (a.to_array(), b.to_array());
+                <$t>::from(std::array::from_fn(|k| fmin(a[k], b[k])))
+            }
+        }
+        #[inline(always)]
+        pub fn $max(a: $t, b: $t) -> $t {
+            #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
+            return a.fast_max(b);
+            #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
+            {
+                let (a, b) = (a.to_array(), b.to_array());
+                <$t>::from(std::array::from_fn(|k| fmax(a[k], b[k])))
+            }
+        }
+    };
+}
+lanewise_min_max!(fmin4, fmax4, wide::f32x4);
+lanewise_min_max!(fmin8, fmax8, wide::f32x8);
+
 #[inline(always)]
 pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

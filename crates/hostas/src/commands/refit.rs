@@ -24,8 +24,9 @@ use crate::layout::{
     EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
     MAX_LEAF_SIZE, NODE_SIZE, Node, PrimKind, WIDTH,
 };
-use crate::math::Aabb;
+use crate::math::{Aabb, fmax4, fmin4};
 use rayon::prelude::*;
+use wide::f32x4;
 
 /// Refits the structure in `bytes`, whose header (`h`), sections and geometry records
 /// `View::parse_sections` accepted. `validate` is the rest of `View::parse` (ids, tree): the
@@ -121,25 +122,13 @@ type Lanes = ([f32; 4], [f32; 4]);
 /// [`crate::math::fmin`] lane by lane.
 #[inline(always)]
 fn min4(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-    use crate::math::fmin;
-    [
-        fmin(a[0], b[0]),
-        fmin(a[1], b[1]),
-        fmin(a[2], b[2]),
-        fmin(a[3], b[3]),
-    ]
+    fmin4(f32x4::new(a), f32x4::new(b)).to_array()
 }
 
 /// [`crate::math::fmax`] lane by lane.
 #[inline(always)]
 fn max4(a: [f32; 4], b: [f32; 4]) -> [f32; 4] {
-    use crate::math::fmax;
-    [
-        fmax(a[0], b[0]),
-        fmax(a[1], b[1]),
-        fmax(a[2], b[2]),
-        fmax(a[3], b[3]),
-    ]
+    fmax4(f32x4::new(a), f32x4::new(b)).to_array()
 }
 
 /// The empty box ([`Aabb::EMPTY`]) as lanes.
@@ -160,40 +149,33 @@ trait StoredPrim: bytemuck::Pod + Send {
     fn leaf_box(prims: &[Self]) -> Lanes;
 }
 
-/// A box being grown, as six scalars (kept apart so that the compiler uses scalar minima
-/// rather than compare-and-blend sequences).
+/// A box being grown: both corners in four lanes (the last unspecified), grown with the
+/// vector forms of `fmin`/`fmax`, which give the same bits as the general path's scalar ones.
 #[derive(Clone, Copy)]
 struct Grow {
-    lo: [f32; 3],
-    hi: [f32; 3],
+    lo: f32x4,
+    hi: f32x4,
 }
 
 impl Grow {
     const EMPTY: Grow = Grow {
-        lo: [f32::INFINITY; 3],
-        hi: [f32::NEG_INFINITY; 3],
+        lo: f32x4::new([f32::INFINITY; 4]),
+        hi: f32x4::new([f32::NEG_INFINITY; 4]),
     };
 
     /// A triangle's box (`Aabb::point(a)`, `grow(b)`, `grow(c)`), then its union with the box
     /// so far: the same operations in the same order as the general path's.
     #[inline(always)]
     fn triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
-        use crate::math::{fmax, fmin};
-        let (lo, hi) = (&mut self.lo, &mut self.hi);
-        lo[0] = fmin(lo[0], fmin(fmin(a[0], b[0]), c[0]));
-        lo[1] = fmin(lo[1], fmin(fmin(a[1], b[1]), c[1]));
-        lo[2] = fmin(lo[2], fmin(fmin(a[2], b[2]), c[2]));
-        hi[0] = fmax(hi[0], fmax(fmax(a[0], b[0]), c[0]));
-        hi[1] = fmax(hi[1], fmax(fmax(a[1], b[1]), c[1]));
-        hi[2] = fmax(hi[2], fmax(fmax(a[2], b[2]), c[2]));
+        let v = |p: [f32; 3]| f32x4::new([p[0], p[1], p[2], p[2]]);
+        let (a, b, c) = (v(a), v(b), v(c));
+        self.lo = fmin4(self.lo, fmin4(fmin4(a, b), c));
+        self.hi = fmax4(self.hi, fmax4(fmax4(a, b), c));
     }
 
     #[inline(always)]
     fn lanes(self) -> Lanes {
-        (
-            [self.lo[0], self.lo[1], self.lo[2], 0.0],
-            [self.hi[0], self.hi[1], self.hi[2], 0.0],
-        )
+        (self.lo.to_array(), self.hi.to_array())
     }
 }
 

@@ -15,7 +15,7 @@ use crate::layout::{
     HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind,
     WIDTH,
 };
-use crate::math::{Affine, Vec3, fmax, fmin};
+use crate::math::{Affine, Vec3, fmax, fmax8, fmin, fmin8};
 use ash::vk;
 use wide::f32x8;
 
@@ -215,17 +215,18 @@ impl BoxRay {
         let [ix, iy, iz] = self.inv.map(s);
         let [jx, jy, jz] = self.inv_far.map(s);
         // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval
-        // unbounded on that axis (`max_or`). Capping the far end at f32::MAX also rejects a
-        // ray parallel to a slab it is outside of, which enters at +inf.
-        let near = max_or(
+        // unbounded on that axis (`fmax8(term, acc)` is `acc` when `term` is NaN). Capping
+        // the far end at f32::MAX also rejects a ray parallel to a slab it is outside of,
+        // which enters at +inf.
+        let near = fmax8(
             (v(nx) - ox) * ix,
-            max_or((v(ny) - oy) * iy, max_or((v(nz) - oz) * iz, s(t_min))),
+            fmax8((v(ny) - oy) * iy, fmax8((v(nz) - oz) * iz, s(t_min))),
         );
-        let far = min_or(
+        let far = fmin8(
             (v(fx) - ox) * jx,
-            min_or(
+            fmin8(
                 (v(fy) - oy) * jy,
-                min_or((v(fz) - oz) * jz, s(fmin(t_max, f32::MAX))),
+                fmin8((v(fz) - oz) * jz, s(fmin(t_max, f32::MAX))),
             ),
         );
         (near.simd_le(far).to_bitmask(), near.to_array())
@@ -313,25 +314,6 @@ impl<'s> Level<'s> {
 }
 
 const _: () = assert!(WIDTH == 8, "the node test is written for f32x8");
-
-/// Lanewise `max(term, acc)` that returns `acc` where `term` is NaN (`acc` never is).
-/// `maxps` does exactly that; elsewhere `max` returns the operand that is not NaN.
-#[inline(always)]
-fn max_or(term: f32x8, acc: f32x8) -> f32x8 {
-    #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-    return term.fast_max(acc);
-    #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
-    return term.max(acc);
-}
-
-/// Lanewise `min(term, acc)` that returns `acc` where `term` is NaN; see [`max_or`].
-#[inline(always)]
-fn min_or(term: f32x8, acc: f32x8) -> f32x8 {
-    #[cfg(any(target_arch = "x86", target_arch = "x86_64"))]
-    return term.fast_min(acc);
-    #[cfg(not(any(target_arch = "x86", target_arch = "x86_64")))]
-    return term.min(acc);
-}
 
 /// Tests the children of node `index`: returns the nearest one the segment reaches, having
 /// pushed the others (farthest deepest), or `None` when it reaches none.
