@@ -72,6 +72,18 @@ impl Box8 {
     }
 }
 
+/// The half areas of three boxes, in lanes 0 to 2 (the same arithmetic as
+/// [`Box8::half_area`], three at a time).
+#[inline(always)]
+fn half_areas3(b: &[Box8; 3]) -> f32x4 {
+    let d = |b: &Box8| {
+        let (lo, neg_hi) = b.halves();
+        lo + neg_hi
+    };
+    let [x, y, z, _] = f32x4::transpose([d(&b[0]), d(&b[1]), d(&b[2]), f32x4::ZERO]);
+    x * y + y * z + z * x
+}
+
 /// A box of points (centroids) as two 4-lane vectors (lane 3 is ignored).
 #[derive(Clone, Copy, Debug)]
 struct B4 {
@@ -90,10 +102,13 @@ impl B4 {
         self.lo = self.lo.fast_min(o.lo);
         self.hi = self.hi.fast_max(o.hi);
     }
+    /// Grows to hold `p`, ignoring NaN lanes of `p` (`minps` returns its second operand when
+    /// either is NaN): the bounds then hold every other centroid, which the partition by a
+    /// threshold relies on (see [`Binner::threshold`]).
     #[inline(always)]
     fn grow_point(&mut self, p: f32x4) {
-        self.lo = self.lo.fast_min(p);
-        self.hi = self.hi.fast_max(p);
+        self.lo = p.fast_min(self.lo);
+        self.hi = p.fast_max(self.hi);
     }
     fn aabb(&self) -> Aabb {
         let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
@@ -226,6 +241,37 @@ impl Binner {
     #[inline(always)]
     fn bins(&self, c: f32x4) -> [u32; 4] {
         bytemuck::cast(((c - self.lo) * self.scale).fast_trunc_int())
+    }
+    /// The least centroid on `axis` whose bin is `bin` or more, given that the range's
+    /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
+    /// The mapping is monotone, so over the range `bin(c) < bin` exactly when `!(c >= t)`: a
+    /// partition by one comparison. (A NaN centroid, in bin 0, goes left either way; the
+    /// range's centroid bounds hold every other centroid, see [`B4::grow_point`].) Found by
+    /// bisection over the floats' order.
+    fn threshold(&self, axis: usize, bin: u32, lo: f32, hi: f32) -> f32 {
+        let (l0, s) = (self.lo.to_array()[axis & 3], self.scales[axis & 3]);
+        // The same arithmetic as `bins` (the value is in `0..bins` over the range).
+        let bin_of = |x: f32| ((x - l0) * s) as i32;
+        // Floats in order as integers, and back (the map is its own inverse).
+        let key = |x: f32| {
+            let b = x.to_bits() as i32;
+            (b ^ (((b >> 31) as u32) >> 1) as i32) as i64
+        };
+        let float = |k: i64| {
+            let b = k as i32;
+            f32::from_bits((b ^ (((b >> 31) as u32) >> 1) as i32) as u32)
+        };
+        // bin(lo) = 0 < bin <= bin(hi).
+        let (mut l, mut h) = (key(lo), key(hi));
+        while h - l > 1 {
+            let m = l + (h - l) / 2;
+            if bin_of(float(m)) >= bin as i32 {
+                h = m;
+            } else {
+                l = m;
+            }
+        }
+        float(h)
     }
 }
 
@@ -477,11 +523,23 @@ fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, B
 fn binned_split_n<const N: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    info: &RangeInfo,
     binner: &Binner,
 ) -> Option<Split> {
     let bins = bin_range::<N>(refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
-    let left_of = |c: f32x4| (binner.bins(c)[axis & 3] & (N as u32 - 1)) < bin as u32;
+    // Left of the plane: `!(c >= t)` on the axis. The other lanes compare with NaN, which is
+    // never true, so the plane's side is whether the mask is empty.
+    let t = binner.threshold(
+        axis,
+        bin as u32,
+        info.centroids.lo[axis],
+        info.centroids.hi[axis],
+    );
+    let mut tv = [f32::NAN; 4];
+    tv[axis & 3] = t;
+    let tv = f32x4::new(tv);
+    let left_of = |c: f32x4| c.simd_ge(tv).to_bitmask() == 0;
     let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
         // On one thread the bins' counts give the left side's size, so no counting pass.
         // (Every stable partition is the same: the bytes do not depend on the path.)
@@ -537,9 +595,9 @@ fn binned_split(
         return None;
     }
     match bins {
-        8 => binned_split_n::<8>(refs, aux, &binner),
-        16 => binned_split_n::<16>(refs, aux, &binner),
-        _ => binned_split_n::<32>(refs, aux, &binner),
+        8 => binned_split_n::<8>(refs, aux, info, &binner),
+        16 => binned_split_n::<16>(refs, aux, info, &binner),
+        _ => binned_split_n::<32>(refs, aux, info, &binner),
     }
 }
 
@@ -604,35 +662,38 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     for (b, r) in boxes.iter_mut().zip(refs.iter()) {
         *b = Box8::of(r);
     }
-    // The three axes are swept side by side: three independent chains of box growth
-    // instead of one after the other.
+    // The three axes are swept side by side: three independent chains of box growth, their
+    // areas computed together.
     let o = &orders.0;
-    let mut right_area = [[0f32; SMALL]; 3];
+    let mut right_area = [f32x4::ZERO; SMALL];
     let mut acc = [Box8::EMPTY; 3];
     for i in (1..n).rev() {
         for k in 0..3 {
             acc[k].grow(&boxes[o[k][i] as usize & (SMALL - 1)]);
-            right_area[k][i] = acc[k].half_area();
         }
+        right_area[i & (SMALL - 1)] = half_areas3(&acc);
     }
     let mut acc = [Box8::EMPTY; 3];
     // Per axis, the first position of least cost (a NaN or infinite cost never wins).
-    let mut best = [(f32::INFINITY, n / 2); 3];
+    let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::splat((n / 2) as f32));
     for i in 1..n {
         for k in 0..3 {
             acc[k].grow(&boxes[o[k][i - 1] as usize & (SMALL - 1)]);
-            let cost = acc[k].half_area() * i as f32 + right_area[k][i] * (n - i) as f32;
-            // Selects, not branches: which position wins is data, not pattern.
-            let better = cost < best[k].0;
-            best[k].0 = if better { cost } else { best[k].0 };
-            best[k].1 = if better { i } else { best[k].1 };
         }
+        let right = right_area[i & (SMALL - 1)];
+        let cost =
+            half_areas3(&acc) * f32x4::splat(i as f32) + right * f32x4::splat((n - i) as f32);
+        // Selects, not branches: which position wins is data, not pattern.
+        let better = cost.simd_lt(best_cost);
+        best_cost = better.select(cost, best_cost);
+        best_at = better.select(f32x4::splat(i as f32), best_at);
     }
     // The first axis of least cost: the same winner as sweeping the axes in turn.
+    let (cost, at) = (best_cost.to_array(), best_at.to_array());
     let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
-    for (k, &(cost, mid)) in best.iter().enumerate() {
-        if cost < best_cost {
-            (best_cost, best_axis, best_mid) = (cost, k, mid);
+    for k in 0..3 {
+        if cost[k] < best_cost {
+            (best_cost, best_axis, best_mid) = (cost[k], k, at[k] as usize);
         }
     }
     // No finite cost (NaN bounds): split in the middle, in the current order.
