@@ -867,14 +867,24 @@ fn build_child(
         info: first.right,
         orders: first_r,
     };
+    // Each part's area when it has at least two primitives (else -1, never picked).
+    let area = |p: &Part| {
+        if p.end - p.begin >= 2 {
+            p.info.bounds.half_area()
+        } else {
+            -1.0
+        }
+    };
+    let mut areas = [-1.0f32; WIDTH];
+    areas[0] = area(&parts[0]);
+    areas[1] = area(&parts[1]);
     let mut count = 2;
     while count < WIDTH {
         // Split the part with the largest area that has at least two primitives.
         let mut pick = None;
         let mut best_area = -1.0f32;
-        for (i, p) in parts[..count].iter().enumerate() {
-            let a = p.info.bounds.half_area();
-            if p.end - p.begin >= 2 && a > best_area {
+        for (i, &a) in areas[..count].iter().enumerate() {
+            if a > best_area {
                 best_area = a;
                 pick = Some(i);
             }
@@ -901,6 +911,8 @@ fn build_child(
             info: s.right,
             orders: ro,
         };
+        areas[i] = area(&parts[i]);
+        areas[count] = area(&parts[count]);
         count += 1;
     }
     let parts = &mut parts[..count];
