@@ -7,73 +7,123 @@
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{Node, WIDTH};
-use crate::math::{Aabb, fmax, fmin};
+use crate::math::Aabb;
 use rayon::prelude::*;
+use wide::{f32x4, f32x8};
 
 pub const MAX_BINS: usize = 32;
 /// Ranges up to this size are split by an exact sweep instead of binning.
 const SMALL: usize = 16;
 
-/// A box as two 4-lane arrays, so that growing it compiles to one `minps` and one `maxps`.
-/// Lane 3 carries whatever the source had there (a primitive id) and is ignored.
+/// Flips the sign of the upper four lanes: a box is kept as `(lo, -hi)` in one 8-lane vector
+/// (as Embree does), so that growing it is a single `minps`.
+const NEG_HI: f32x8 = f32x8::new([0.0, 0.0, 0.0, 0.0, -0.0, -0.0, -0.0, -0.0]);
+
+/// A box as `[lo.x, lo.y, lo.z, _, -hi.x, -hi.y, -hi.z, _]`. Lanes 3 and 7 carry whatever
+/// the source had there (a primitive's id and pad) and are ignored.
 #[derive(Clone, Copy, Debug)]
-struct B4 {
-    lo: [f32; 4],
-    hi: [f32; 4],
-}
+struct Box8(f32x8);
 
-impl B4 {
-    const EMPTY: B4 = B4 {
-        lo: [f32::INFINITY; 4],
-        hi: [f32::NEG_INFINITY; 4],
-    };
+impl Box8 {
+    const EMPTY: Box8 = Box8(f32x8::new([f32::INFINITY; 8]));
 
     #[inline(always)]
-    fn of(r: &PrimRef) -> B4 {
-        let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
-        B4 { lo, hi }
+    fn of(r: &PrimRef) -> Box8 {
+        Box8(f32x8::new(bytemuck::cast(*r)) ^ NEG_HI)
+    }
+    /// The reference this box was made from by [`Box8::of`].
+    #[inline(always)]
+    fn prim_ref(&self) -> PrimRef {
+        bytemuck::cast(self.0 ^ NEG_HI)
+    }
+    /// Grows to hold `o`: `minps` with the operand order of `fmin`/`fmax` (a NaN in `o`
+    /// wins over the current bound).
+    #[inline(always)]
+    fn grow(&mut self, o: &Box8) {
+        self.0 = self.0.fast_min(o.0);
     }
     #[inline(always)]
-    fn grow(&mut self, o: &B4) {
-        for i in 0..4 {
-            self.lo[i] = fmin(self.lo[i], o.lo[i]);
-            self.hi[i] = fmax(self.hi[i], o.hi[i]);
-        }
-    }
-    #[inline(always)]
-    fn grow_point(&mut self, p: &[f32; 4]) {
-        for i in 0..4 {
-            self.lo[i] = fmin(self.lo[i], p[i]);
-            self.hi[i] = fmax(self.hi[i], p[i]);
-        }
+    fn halves(&self) -> (f32x4, f32x4) {
+        let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(self.0);
+        (lo, neg_hi)
     }
     #[inline(always)]
     fn half_area(&self) -> f32 {
-        let d = [
-            self.hi[0] - self.lo[0],
-            self.hi[1] - self.lo[1],
-            self.hi[2] - self.lo[2],
-        ];
+        let (lo, neg_hi) = self.halves();
+        // The negated extent (exactly): its products are the extent's.
+        let d = (lo + neg_hi).to_array();
         // No test for empty boxes: theirs is infinite, and times a count of zero it makes a
         // NaN cost, which loses every comparison.
         d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
     }
     /// The doubled centroid (lane 3 is meaningless).
     #[inline(always)]
-    fn center2(&self) -> [f32; 4] {
-        [
-            self.lo[0] + self.hi[0],
-            self.lo[1] + self.hi[1],
-            self.lo[2] + self.hi[2],
-            0.0,
-        ]
+    fn center2(&self) -> f32x4 {
+        let (lo, neg_hi) = self.halves();
+        lo - neg_hi
     }
     fn aabb(&self) -> Aabb {
+        let (lo, neg_hi) = self.halves();
+        let (lo, hi) = (lo.to_array(), (-neg_hi).to_array());
         Aabb {
-            lo: [self.lo[0], self.lo[1], self.lo[2]],
-            hi: [self.hi[0], self.hi[1], self.hi[2]],
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
         }
     }
+}
+
+/// The half areas of three boxes, in lanes 0 to 2 (the same arithmetic as
+/// [`Box8::half_area`], three at a time).
+#[inline(always)]
+fn half_areas3(b: &[Box8; 3]) -> f32x4 {
+    let d = |b: &Box8| {
+        let (lo, neg_hi) = b.halves();
+        lo + neg_hi
+    };
+    let [x, y, z, _] = f32x4::transpose([d(&b[0]), d(&b[1]), d(&b[2]), f32x4::ZERO]);
+    x * y + y * z + z * x
+}
+
+/// A box of points (centroids) as two 4-lane vectors (lane 3 is ignored).
+#[derive(Clone, Copy, Debug)]
+struct B4 {
+    lo: f32x4,
+    hi: f32x4,
+}
+
+impl B4 {
+    const EMPTY: B4 = B4 {
+        lo: f32x4::new([f32::INFINITY; 4]),
+        hi: f32x4::new([f32::NEG_INFINITY; 4]),
+    };
+
+    #[inline(always)]
+    fn grow(&mut self, o: &B4) {
+        self.lo = self.lo.fast_min(o.lo);
+        self.hi = self.hi.fast_max(o.hi);
+    }
+    /// Grows to hold `p`, ignoring NaN lanes of `p` (`minps` returns its second operand when
+    /// either is NaN): the bounds then hold every other centroid, which the partition by a
+    /// threshold relies on (see [`Binner::threshold`]).
+    #[inline(always)]
+    fn grow_point(&mut self, p: f32x4) {
+        self.lo = p.fast_min(self.lo);
+        self.hi = p.fast_max(self.hi);
+    }
+    fn aabb(&self) -> Aabb {
+        let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
+        Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        }
+    }
+}
+
+/// The doubled centroid of a reference (lane 3 is meaningless).
+#[inline(always)]
+fn center2(r: &PrimRef) -> f32x4 {
+    let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
+    f32x4::new(lo) + f32x4::new(hi)
 }
 
 /// Bounds of a range and of its primitives' (doubled) centroids.
@@ -86,21 +136,20 @@ pub(crate) struct RangeInfo {
 /// [`RangeInfo`] while it is being accumulated.
 #[derive(Clone, Copy)]
 struct Acc {
-    bounds: B4,
+    bounds: Box8,
     centroids: B4,
 }
 
 impl Acc {
     const EMPTY: Acc = Acc {
-        bounds: B4::EMPTY,
+        bounds: Box8::EMPTY,
         centroids: B4::EMPTY,
     };
     #[inline(always)]
     fn add(&mut self, r: &PrimRef) {
-        let b = B4::of(r);
+        let b = Box8::of(r);
         self.bounds.grow(&b);
-        let c = [b.lo[0] + b.hi[0], b.lo[1] + b.hi[1], b.lo[2] + b.hi[2], 0.0];
-        self.centroids.grow_point(&c);
+        self.centroids.grow_point(b.center2());
     }
     fn of(refs: &[PrimRef]) -> RangeInfo {
         let mut acc = Acc::EMPTY;
@@ -156,19 +205,17 @@ struct Split {
     cost: f32,
 }
 
-/// Adding this to a float in `[-2^22, 2^22)` rounds it to an integer, left in the low mantissa
-/// bits: a conversion that vectorizes (a saturating `as` does not).
-const ROUND: f32 = 12_582_912.0;
-
-/// Maps doubled centroids to bins, on all axes at once. The mapping is monotone in the
-/// centroid on each axis, and binning and partitioning use the same arithmetic, so a partition
-/// always agrees with the bin counts. Centroids of the range the binner was made for land in
-/// `0..bins` without clamping (`scale` leaves a margin); anything else (NaN, infinities) lands
-/// in some bin, masked into range by the caller.
+/// Maps doubled centroids to bins, on all axes at once (`cvttps2dq` of the scaled offset).
+/// The mapping is monotone in the centroid on each axis, and binning and partitioning use the
+/// same arithmetic, so a partition always agrees with the bin counts. Centroids of the range
+/// the binner was made for land in `0..bins` (`scale` leaves a margin); anything else (NaN,
+/// infinities) lands in some bin, masked into range by the caller.
 #[derive(Clone, Copy)]
 struct Binner {
-    lo: [f32; 4],
-    scale: [f32; 4],
+    lo: f32x4,
+    scale: f32x4,
+    /// `scale` as scalars (axes without extent have 0).
+    scales: [f32; 4],
 }
 
 impl Binner {
@@ -184,23 +231,47 @@ impl Binner {
                 0.0
             };
         }
-        Binner { lo, scale }
-    }
-    /// The bin on each axis, before masking (lane 3 is meaningless).
-    #[inline(always)]
-    fn bins(&self, r: &PrimRef) -> [u32; 4] {
-        let b = B4::of(r);
-        let mut f = [0f32; 4];
-        for k in 0..4 {
-            f[k] = (b.lo[k] + b.hi[k] - self.lo[k]) * self.scale[k] - 0.5 + ROUND;
+        Binner {
+            lo: f32x4::new(lo),
+            scale: f32x4::new(scale),
+            scales: scale,
         }
-        f.map(f32::to_bits)
     }
-    /// The bin of `r` on `axis`, masked to `mask`: the same arithmetic as [`Binner::bins`].
+    /// The bin on each axis of a doubled centroid, before masking (lane 3 is meaningless).
     #[inline(always)]
-    fn bin(&self, r: &PrimRef, axis: usize, mask: u32) -> u32 {
-        let x = (r.lo[axis] + r.hi[axis] - self.lo[axis]) * self.scale[axis] - 0.5 + ROUND;
-        x.to_bits() & mask
+    fn bins(&self, c: f32x4) -> [u32; 4] {
+        bytemuck::cast(((c - self.lo) * self.scale).fast_trunc_int())
+    }
+    /// The least centroid on `axis` whose bin is `bin` or more, given that the range's
+    /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
+    /// The mapping is monotone, so over the range `bin(c) < bin` exactly when `!(c >= t)`: a
+    /// partition by one comparison. (A NaN centroid, in bin 0, goes left either way; the
+    /// range's centroid bounds hold every other centroid, see [`B4::grow_point`].) Found by
+    /// bisection over the floats' order.
+    fn threshold(&self, axis: usize, bin: u32, lo: f32, hi: f32) -> f32 {
+        let (l0, s) = (self.lo.to_array()[axis & 3], self.scales[axis & 3]);
+        // The same arithmetic as `bins` (the value is in `0..bins` over the range).
+        let bin_of = |x: f32| ((x - l0) * s) as i32;
+        // Floats in order as integers, and back (the map is its own inverse).
+        let key = |x: f32| {
+            let b = x.to_bits() as i32;
+            (b ^ (((b >> 31) as u32) >> 1) as i32) as i64
+        };
+        let float = |k: i64| {
+            let b = k as i32;
+            f32::from_bits((b ^ (((b >> 31) as u32) >> 1) as i32) as u32)
+        };
+        // bin(lo) = 0 < bin <= bin(hi).
+        let (mut l, mut h) = (key(lo), key(hi));
+        while h - l > 1 {
+            let m = l + (h - l) / 2;
+            if bin_of(float(m)) >= bin as i32 {
+                h = m;
+            } else {
+                l = m;
+            }
+        }
+        float(h)
     }
 }
 
@@ -208,23 +279,23 @@ impl Binner {
 /// (Counts as `[bin][axis]` lanes ran 2-3 times slower here: the increments then share
 /// 16-byte words, which stalls the loads of the next primitive's bins.)
 struct Bins<const N: usize> {
-    bounds: [[B4; N]; 3],
+    bounds: [[Box8; N]; 3],
     counts: [[u32; N]; 3],
 }
 
 impl<const N: usize> Bins<N> {
     fn new() -> Bins<N> {
         Bins {
-            bounds: [[B4::EMPTY; N]; 3],
+            bounds: [[Box8::EMPTY; N]; 3],
             counts: [[0; N]; 3],
         }
     }
     #[inline(always)]
-    fn add(&mut self, i: [u32; 4], rb: &B4) {
+    fn add(&mut self, i: [u32; 4], b: &Box8) {
         for k in 0..3 {
             let j = i[k] as usize & (N - 1);
             self.counts[k][j] += 1;
-            self.bounds[k][j].grow(rb);
+            self.bounds[k][j].grow(b);
         }
     }
     fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
@@ -235,22 +306,25 @@ impl<const N: usize> Bins<N> {
             let pairs = refs.chunks_exact(2);
             let rest = pairs.remainder();
             for p in pairs {
-                self.add(binner.bins(&p[0]), &B4::of(&p[0]));
-                other.add(binner.bins(&p[1]), &B4::of(&p[1]));
+                let (b0, b1) = (Box8::of(&p[0]), Box8::of(&p[1]));
+                self.add(binner.bins(b0.center2()), &b0);
+                other.add(binner.bins(b1.center2()), &b1);
             }
             for r in rest {
-                self.add(binner.bins(r), &B4::of(r));
+                let b = Box8::of(r);
+                self.add(binner.bins(b.center2()), &b);
             }
             self.merge_from(&other);
             return;
         }
         for r in refs {
-            self.add(binner.bins(r), &B4::of(r));
+            let b = Box8::of(r);
+            self.add(binner.bins(b.center2()), &b);
         }
     }
     fn merge_from(&mut self, b: &Bins<N>) {
-        for i in 0..N {
-            for k in 0..3 {
+        for k in 0..3 {
+            for i in 0..N {
                 self.counts[k][i] += b.counts[k][i];
                 self.bounds[k][i].grow(&b.bounds[k][i]);
             }
@@ -268,7 +342,7 @@ impl<const N: usize> Bins<N> {
         // least cost with selects; then the first axis of least cost: the same winner as
         // sweeping the axes in turn.
         let mut right_cost = [[0f32; N]; 3];
-        let mut acc = [B4::EMPTY; 3];
+        let mut acc = [Box8::EMPTY; 3];
         let mut n = [0u32; 3];
         for i in (1..N).rev() {
             for k in 0..3 {
@@ -277,7 +351,7 @@ impl<const N: usize> Bins<N> {
                 right_cost[k][i] = acc[k].half_area() * n[k] as f32;
             }
         }
-        let mut acc = [B4::EMPTY; 3];
+        let mut acc = [Box8::EMPTY; 3];
         let mut n = [0u32; 3];
         let mut best = [(f32::INFINITY, 0usize); 3];
         for i in 1..N {
@@ -294,7 +368,7 @@ impl<const N: usize> Bins<N> {
         let mut best_cost = f32::INFINITY;
         for (k, &(cost, i)) in best.iter().enumerate() {
             // Axes without extent are never split on.
-            if binner.scale[k] != 0.0 && cost < best_cost {
+            if binner.scales[k] != 0.0 && cost < best_cost {
                 best_cost = cost;
                 pick = Some((k, i, cost));
             }
@@ -304,7 +378,7 @@ impl<const N: usize> Bins<N> {
 
     /// Bounds of both sides of a plane.
     fn sides(&self, axis: usize, bin: usize) -> (Aabb, Aabb) {
-        let (mut l, mut r) = (B4::EMPTY, B4::EMPTY);
+        let (mut l, mut r) = (Box8::EMPTY, Box8::EMPTY);
         for (i, b) in self.bounds[axis].iter().enumerate() {
             if i < bin {
                 l.grow(b);
@@ -340,12 +414,12 @@ fn bin_range<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Bins<N> {
 fn parallel_partition(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
-    left_of: impl Fn(&PrimRef) -> bool + Sync,
+    left_of: impl Fn(f32x4) -> bool + Sync,
 ) -> (usize, B4, B4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
     let lefts: Vec<usize> = refs
         .par_chunks(CHUNK)
-        .map(|c| c.iter().filter(|r| left_of(r)).count())
+        .map(|c| c.iter().filter(|r| left_of(center2(r))).count())
         .collect();
     let total_left: usize = lefts.iter().sum();
     // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
@@ -366,14 +440,15 @@ fn parallel_partition(
             let (mut la, mut ra) = (B4::EMPTY, B4::EMPTY);
             let (mut li, mut ri) = (0, 0);
             for r in c {
-                if left_of(r) {
+                let c = center2(r);
+                if left_of(c) {
                     lp[li] = *r;
                     li += 1;
-                    la.grow_point(&B4::of(r).center2());
+                    la.grow_point(c);
                 } else {
                     rp[ri] = *r;
                     ri += 1;
-                    ra.grow_point(&B4::of(r).center2());
+                    ra.grow_point(c);
                 }
             }
             (la, ra)
@@ -396,7 +471,7 @@ fn stable_partition(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     left: usize,
-    left_of: impl Fn(&PrimRef) -> bool,
+    left_of: impl Fn(f32x4) -> bool,
 ) -> Option<(usize, B4, B4)> {
     let aux = &mut aux[..refs.len()];
     // Centroid bounds of the right side, then the left, indexed by the side (see `partition`).
@@ -404,8 +479,9 @@ fn stable_partition(
     let acc = std::hint::black_box(&mut storage);
     let (mut li, mut ri) = (0, left);
     for r in refs.iter() {
-        let is_left = left_of(r);
-        acc[is_left as usize].grow_point(&B4::of(r).center2());
+        let c = center2(r);
+        let is_left = left_of(c);
+        acc[is_left as usize].grow_point(c);
         let at = if is_left { li } else { ri };
         if let Some(d) = aux.get_mut(at) {
             *d = *r;
@@ -420,17 +496,12 @@ fn stable_partition(
     Some((left, storage[1], storage[0]))
 }
 
-/// Partitions `refs` in place into those with `bin(axis) < bin` first; returns the size of the
-/// left side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
-/// swap, bounds accumulated in an array indexed by the side): which side a primitive goes to is often a coin toss, and
-/// mispredicted branches cost more than the extra stores.
-fn partition(
-    refs: &mut [PrimRef],
-    binner: &Binner,
-    axis: usize,
-    bin: u32,
-    mask: u32,
-) -> (usize, B4, B4) {
+/// Partitions `refs` in place into those with `left_of(centroid)` first; returns the size of
+/// the left side and the centroid bounds of both sides. Branch-free (Lomuto with an
+/// unconditional swap, bounds accumulated in an array indexed by the side): which side a
+/// primitive goes to is often a coin toss, and mispredicted branches cost more than the extra
+/// stores.
+fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, B4, B4) {
     // Centroid bounds of the right side, then the left: indexed by the side, not branched on
     // (kept in memory: as two registers, the compiler would branch again).
     let mut storage = [B4::EMPTY; 2];
@@ -438,8 +509,9 @@ fn partition(
     let mut i = 0;
     for j in 0..refs.len() {
         let r = refs[j];
-        let left = binner.bin(&r, axis, mask) < bin;
-        acc[left as usize].grow_point(&B4::of(&r).center2());
+        let c = center2(&r);
+        let left = left_of(c);
+        acc[left as usize].grow_point(c);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
         refs[j] = refs[i];
         refs[i] = r;
@@ -451,12 +523,24 @@ fn partition(
 fn binned_split_n<const N: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    info: &RangeInfo,
     binner: &Binner,
 ) -> Option<Split> {
     let bins = bin_range::<N>(refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
+    // Left of the plane: `!(c >= t)` on the axis. The other lanes compare with NaN, which is
+    // never true, so the plane's side is whether the mask is empty.
+    let t = binner.threshold(
+        axis,
+        bin as u32,
+        info.centroids.lo[axis],
+        info.centroids.hi[axis],
+    );
+    let mut tv = [f32::NAN; 4];
+    tv[axis & 3] = t;
+    let tv = f32x4::new(tv);
+    let left_of = |c: f32x4| c.simd_ge(tv).to_bitmask() == 0;
     let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
-        let left_of = |r: &PrimRef| binner.bin(r, axis, N as u32 - 1) < bin as u32;
         // On one thread the bins' counts give the left side's size, so no counting pass.
         // (Every stable partition is the same: the bytes do not depend on the path.)
         let counted: u32 = bins.counts[axis][..bin].iter().sum();
@@ -467,7 +551,7 @@ fn binned_split_n<const N: usize>(
         };
         single.unwrap_or_else(|| parallel_partition(refs, aux, left_of))
     } else {
-        partition(refs, binner, axis, bin as u32, N as u32 - 1)
+        partition(refs, left_of)
     };
     if mid == 0 || mid == refs.len() {
         return None;
@@ -507,13 +591,13 @@ fn binned_split(
         _ => 32,
     };
     let binner = Binner::new(&info.centroids, bins);
-    if binner.scale == [0.0; 4] {
+    if binner.scales == [0.0; 4] {
         return None;
     }
     match bins {
-        8 => binned_split_n::<8>(refs, aux, &binner),
-        16 => binned_split_n::<16>(refs, aux, &binner),
-        _ => binned_split_n::<32>(refs, aux, &binner),
+        8 => binned_split_n::<8>(refs, aux, info, &binner),
+        16 => binned_split_n::<16>(refs, aux, info, &binner),
+        _ => binned_split_n::<32>(refs, aux, info, &binner),
     }
 }
 
@@ -573,40 +657,43 @@ impl Orders {
 /// Returns the split and the orders of both sides.
 fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
     let n = refs.len().min(SMALL);
-    // A box as a B4 carries the whole reference (lane 3 holds the id and the pad).
-    let mut boxes = [B4::EMPTY; SMALL];
+    // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
+    let mut boxes = [Box8::EMPTY; SMALL];
     for (b, r) in boxes.iter_mut().zip(refs.iter()) {
-        *b = B4::of(r);
+        *b = Box8::of(r);
     }
-    // The three axes are swept side by side: three independent chains of box growth
-    // instead of one after the other.
+    // The three axes are swept side by side: three independent chains of box growth, their
+    // areas computed together.
     let o = &orders.0;
-    let mut right_area = [[0f32; SMALL]; 3];
-    let mut acc = [B4::EMPTY; 3];
+    let mut right_area = [f32x4::ZERO; SMALL];
+    let mut acc = [Box8::EMPTY; 3];
     for i in (1..n).rev() {
         for k in 0..3 {
             acc[k].grow(&boxes[o[k][i] as usize & (SMALL - 1)]);
-            right_area[k][i] = acc[k].half_area();
         }
+        right_area[i & (SMALL - 1)] = half_areas3(&acc);
     }
-    let mut acc = [B4::EMPTY; 3];
+    let mut acc = [Box8::EMPTY; 3];
     // Per axis, the first position of least cost (a NaN or infinite cost never wins).
-    let mut best = [(f32::INFINITY, n / 2); 3];
+    let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::splat((n / 2) as f32));
     for i in 1..n {
         for k in 0..3 {
             acc[k].grow(&boxes[o[k][i - 1] as usize & (SMALL - 1)]);
-            let cost = acc[k].half_area() * i as f32 + right_area[k][i] * (n - i) as f32;
-            // Selects, not branches: which position wins is data, not pattern.
-            let better = cost < best[k].0;
-            best[k].0 = if better { cost } else { best[k].0 };
-            best[k].1 = if better { i } else { best[k].1 };
         }
+        let right = right_area[i & (SMALL - 1)];
+        let cost =
+            half_areas3(&acc) * f32x4::splat(i as f32) + right * f32x4::splat((n - i) as f32);
+        // Selects, not branches: which position wins is data, not pattern.
+        let better = cost.simd_lt(best_cost);
+        best_cost = better.select(cost, best_cost);
+        best_at = better.select(f32x4::splat(i as f32), best_at);
     }
     // The first axis of least cost: the same winner as sweeping the axes in turn.
+    let (cost, at) = (best_cost.to_array(), best_at.to_array());
     let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
-    for (k, &(cost, mid)) in best.iter().enumerate() {
-        if cost < best_cost {
-            (best_cost, best_axis, best_mid) = (cost, k, mid);
+    for k in 0..3 {
+        if cost[k] < best_cost {
+            (best_cost, best_axis, best_mid) = (cost[k], k, at[k] as usize);
         }
     }
     // No finite cost (NaN bounds): split in the middle, in the current order.
@@ -615,7 +702,7 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     let mut pos = [0u8; SMALL];
     for (i, (dst, &src)) in refs.iter_mut().zip(&perm[..n]).enumerate() {
         let b = &boxes[src as usize & (SMALL - 1)];
-        *dst = bytemuck::cast([b.lo, b.hi]);
+        *dst = b.prim_ref();
         pos[src as usize & (SMALL - 1)] = i as u8;
     }
     let (left, right) = refs.split_at(best_mid);
@@ -780,14 +867,24 @@ fn build_child(
         info: first.right,
         orders: first_r,
     };
+    // Each part's area when it has at least two primitives (else -1, never picked).
+    let area = |p: &Part| {
+        if p.end - p.begin >= 2 {
+            p.info.bounds.half_area()
+        } else {
+            -1.0
+        }
+    };
+    let mut areas = [-1.0f32; WIDTH];
+    areas[0] = area(&parts[0]);
+    areas[1] = area(&parts[1]);
     let mut count = 2;
     while count < WIDTH {
         // Split the part with the largest area that has at least two primitives.
         let mut pick = None;
         let mut best_area = -1.0f32;
-        for (i, p) in parts[..count].iter().enumerate() {
-            let a = p.info.bounds.half_area();
-            if p.end - p.begin >= 2 && a > best_area {
+        for (i, &a) in areas[..count].iter().enumerate() {
+            if a > best_area {
                 best_area = a;
                 pick = Some(i);
             }
@@ -814,6 +911,8 @@ fn build_child(
             info: s.right,
             orders: ro,
         };
+        areas[i] = area(&parts[i]);
+        areas[count] = area(&parts[count]);
         count += 1;
     }
     let parts = &mut parts[..count];

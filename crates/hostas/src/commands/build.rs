@@ -781,6 +781,10 @@ fn decode_geometries(
         };
         let geom_data = &mut data[first * size..(first + count) * size];
         let geom_refs = &mut refs[first..first + count];
+        let fast = match reader {
+            Reader::Triangles(t) => F32Tris::new(t),
+            _ => None,
+        };
         let results: Vec<Result<usize>> = geom_data
             .par_chunks_mut(CHUNK * size)
             .zip(geom_refs.par_chunks_mut(CHUNK))
@@ -790,28 +794,22 @@ fn decode_geometries(
                 let base = c * CHUNK;
                 match reader {
                     Reader::Triangles(t) => {
-                        let outs = chunk.chunks_exact_mut(TRI_BYTES);
-                        for (j, (out, r)) in outs.zip(chunk_refs.iter_mut()).enumerate() {
-                            let i = (base + j) as u32;
-                            let f = match t.triangle_fast(i) {
-                                Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
-                                _ => match t.triangle(i)? {
-                                    Some(v) => [
-                                        v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2],
-                                        v[2][0], v[2][1], v[2][2],
-                                    ],
-                                    None => [f32::NAN; 9],
-                                },
+                        let outs: &mut [[u8; TRI_BYTES]] = bytemuck::try_cast_slice_mut(chunk)
+                            .map_err(|_| internal("triangle slots"))?;
+                        for (j, (out, r)) in outs.iter_mut().zip(chunk_refs.iter_mut()).enumerate()
+                        {
+                            let i = base + j;
+                            let f = match fast.as_ref().and_then(|d| d.get(i)) {
+                                Some(f) => f,
+                                None => reader_triangle(t, i as u32)?,
                             };
-                            let out: &mut [u8; TRI_BYTES] =
-                                out.try_into().map_err(|_| internal("triangle slot"))?;
                             *out = bytemuck::cast(f);
                             let mut b = Aabb::point([f[0], f[1], f[2]]);
                             b.grow([f[3], f[4], f[5]]);
                             b.grow([f[6], f[7], f[8]]);
                             let dead = f[0].is_nan();
                             inactive += dead as usize;
-                            *r = PrimRef::new(&b, (first + base + j) as u32);
+                            *r = PrimRef::new(&b, (first + i) as u32);
                             r.pad = dead as u32;
                         }
                     }
@@ -856,6 +854,85 @@ fn decode_geometries(
         }
     }
     Ok(stored)
+}
+
+/// Triangle `i` through the reader, every format and error handled (inactive: NaNs).
+#[cold]
+#[inline(never)]
+fn reader_triangle(t: &TriangleReader, i: u32) -> Result<[f32; 9]> {
+    Ok(match t.triangle_fast(i) {
+        Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
+        _ => match t.triangle(i)? {
+            Some(v) => [
+                v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2],
+            ],
+            None => [f32::NAN; 9],
+        },
+    })
+}
+
+/// An `R32G32B32_SFLOAT` triangle geometry without a transform, its format and layout
+/// checked once instead of per triangle (the decode loop's common case).
+struct F32Tris<'a> {
+    /// 0 (no indices), 2 or 4.
+    index_size: usize,
+    index: &'a [u8],
+    verts: &'a [u8],
+    stride: usize,
+    first_vertex: usize,
+    max_vertex: usize,
+}
+
+impl<'a> F32Tris<'a> {
+    fn new(t: &TriangleReader<'a>) -> Option<F32Tris<'a>> {
+        let l = t.f32_layout()?;
+        if l.transform.is_some() || !matches!(l.index_size, 0 | 2 | 4) {
+            return None;
+        }
+        Some(F32Tris {
+            index_size: l.index_size,
+            index: l.index_data,
+            verts: l.vertex_data,
+            stride: l.vertex_stride,
+            first_vertex: l.first_vertex,
+            max_vertex: l.max_vertex,
+        })
+    }
+
+    /// Triangle `p` of the range as nine floats, as `TriangleReader::triangle_fast` reads it,
+    /// when it is active and in range; `None` sends it through the reader (which also says
+    /// what is wrong).
+    #[inline(always)]
+    fn get(&self, p: usize) -> Option<[f32; 9]> {
+        let idx = match self.index_size {
+            0 => [3 * p, 3 * p + 1, 3 * p + 2],
+            2 => {
+                let b: &[u8; 6] = self.index.get(6 * p..6 * p + 6)?.try_into().ok()?;
+                let at = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]) as usize;
+                [at(0), at(2), at(4)]
+            }
+            _ => {
+                let b: &[u8; 12] = self.index.get(12 * p..12 * p + 12)?.try_into().ok()?;
+                let at = |k: usize| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
+                [at(0) as usize, at(4) as usize, at(8) as usize]
+            }
+        };
+        let fv = self.first_vertex;
+        let idx = [idx[0] + fv, idx[1] + fv, idx[2] + fv];
+        if idx[0].max(idx[1]).max(idx[2]) > self.max_vertex {
+            return None;
+        }
+        let mut out = [0f32; 9];
+        for k in 0..3 {
+            let at = idx[k].checked_mul(self.stride)?;
+            let b: &[u8; 12] = self.verts.get(at..at.checked_add(12)?)?.try_into().ok()?;
+            let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+            out[3 * k] = f(0);
+            out[3 * k + 1] = f(4);
+            out[3 * k + 2] = f(8);
+        }
+        (!(out[0].is_nan() || out[3].is_nan() || out[6].is_nan())).then_some(out)
+    }
 }
 
 fn internal(what: &str) -> Error {
