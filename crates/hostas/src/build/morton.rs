@@ -83,10 +83,19 @@ impl Bounds {
     }
 }
 
-/// The doubled centroid of `r` (`lo + hi`), lane 3 zero (it would add the id's bits).
+/// Keeps lanes 0..3 (lane 3 of a reference holds the id or pad bits).
+const XYZ: f32x4 = f32x4::new([
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    0.0,
+]);
+
+/// The doubled centroid of `r` (`lo + hi`), lane 3 zero.
 #[inline(always)]
 fn center2(r: &PrimRef) -> f32x4 {
-    f32x4::from([r.lo[0], r.lo[1], r.lo[2], 0.0]) + f32x4::from([r.hi[0], r.hi[1], r.hi[2], 0.0])
+    let [lo, hi]: [f32x4; 2] = bytemuck::cast(*r);
+    (lo & XYZ) + (hi & XYZ)
 }
 
 /// Bounds of the doubled centroids, over fixed chunks combined in order.
@@ -124,15 +133,14 @@ fn starts(h: &mut [u32; BUCKETS]) {
 }
 
 /// One radix pass: `src` scattered into `dst` by the digit at `shift` (`at` holds the bucket
-/// starts), counting the digit at `next_shift` into `next` when `COUNT`.
+/// starts), `each` seeing every key (to count the next digit).
 #[inline(always)]
-fn scatter<const COUNT: bool>(
+fn scatter(
     src: &[u64],
     dst: &mut [u64],
     at: &mut [u32; BUCKETS],
     shift: u32,
-    next: &mut [u32; BUCKETS],
-    next_shift: u32,
+    mut each: impl FnMut(u64),
 ) {
     for &k in src {
         let b = (k >> shift) as usize & (BUCKETS - 1);
@@ -141,10 +149,81 @@ fn scatter<const COUNT: bool>(
             *d = k;
         }
         at[b] = p + 1;
-        if COUNT {
-            next[(k >> next_shift) as usize & (BUCKETS - 1)] += 1;
-        }
+        each(k);
     }
+}
+
+/// Counts the digit at `shift` of `k` into `h`.
+#[inline(always)]
+fn count(h: &mut [u32; BUCKETS], shift: u32) -> impl FnMut(u64) + '_ {
+    move |k| h[(k >> shift) as usize & (BUCKETS - 1)] += 1
+}
+
+/// Inputs of at least this many primitives sort by the top digit first.
+const MSD_MIN: usize = 1 << 17;
+/// Top buckets up to this size are sorted by comparison.
+const SMALL_SORT: usize = 96;
+
+/// Sorts `keys` (one top bucket) by the two lower code digits, with `tmp` (as long) as
+/// working space.
+fn sort_low(keys: &mut [u64], tmp: &mut [u64]) {
+    if keys.len() <= SMALL_SORT {
+        keys.sort_unstable();
+        return;
+    }
+    let (mut h0, mut h1) = ([0u32; BUCKETS], [0u32; BUCKETS]);
+    for &k in keys.iter() {
+        h0[(k >> 32) as usize & (BUCKETS - 1)] += 1;
+        h1[(k >> (32 + DIGIT)) as usize & (BUCKETS - 1)] += 1;
+    }
+    starts(&mut h0);
+    starts(&mut h1);
+    scatter(keys, tmp, &mut h0, 32, |_| {});
+    scatter(tmp, keys, &mut h1, 32 + DIGIT, |_| {});
+}
+
+/// Sorts `keys` into `tmp` (both changed), given the counts of the first digit sorted by
+/// (the top one when `msd`, else the lowest). Returns where each top digit starts in the
+/// sorted order, then the length: the split points of the top levels, read off instead of
+/// searched for.
+fn sort(keys: &mut [u64], tmp: &mut [u64], mut h: Hist, msd: bool) -> Vec<u32> {
+    let n = keys.len();
+    starts(&mut h);
+    let mut top;
+    if msd {
+        top = h.to_vec();
+        top.push(n as u32);
+        scatter(keys, tmp, &mut h, 32 + TOP_SHIFT, |_| {});
+        let mut buckets = Vec::with_capacity(BUCKETS);
+        let (mut a, mut t) = (&mut tmp[..], &mut keys[..]);
+        for w in top.windows(2) {
+            let m = (w[1] - w[0]) as usize;
+            let (x, a2) = std::mem::take(&mut a).split_at_mut(m);
+            let (y, t2) = std::mem::take(&mut t).split_at_mut(m);
+            buckets.push((x, y));
+            (a, t) = (a2, t2);
+        }
+        buckets
+            .into_par_iter()
+            .with_min_len(BUCKETS / 16)
+            .for_each(|(x, y)| sort_low(x, y));
+    } else {
+        let (mut h1, mut h2) = (hist_new(), hist_new());
+        scatter(keys, tmp, &mut h, 32, count(&mut h1, 32 + DIGIT));
+        starts(&mut h1);
+        scatter(
+            tmp,
+            keys,
+            &mut h1,
+            32 + DIGIT,
+            count(&mut h2, 32 + TOP_SHIFT),
+        );
+        starts(&mut h2);
+        top = h2.to_vec();
+        top.push(n as u32);
+        scatter(keys, tmp, &mut h2, 32 + TOP_SHIFT, |_| {});
+    }
+    top
 }
 
 pub fn build(
@@ -166,18 +245,24 @@ pub fn build(
             .map(|e| if e > 0.0 { 1023.0 / e } else { 0.0 }),
     );
     let lo = c.lo;
-    // Keys (code, position) and the lowest digit's histogram, copying the references into
-    // `aux` on the way. Centroids lie in the bounds, so the scaled values are in [0, 1023]
+    // Keys (code, position) and the histogram of the first digit sorted by, copying the
+    // references into `aux` on the way. Centroids lie in the bounds, so the scaled values are in [0, 1023]
     // (up to rounding below 1024); NaN converts to i32::MIN, whose low bits are 0.
     let keys = &mut keys[..n];
     let tmp = &mut tmp[..n];
     let aux = &mut aux[..n];
-    let mut h0 = keys
+    // Large inputs are sorted by the top digit first (one pass through memory) and then each
+    // top bucket by the two lower digits where it sits in the caches; small ones by three
+    // passes from the lowest digit, each counting the next. Both sort by the whole key, whose
+    // low half (the position) keeps equal codes in input order.
+    let msd = n >= MSD_MIN;
+    let first_digit = if msd { TOP_SHIFT } else { 0 };
+    let h = keys
         .par_chunks_mut(CHUNK)
         .zip(refs.par_chunks(CHUNK))
         .zip(aux.par_chunks_mut(CHUNK))
         .enumerate()
-        .map(|(ci, ((ks, rs), xs))| {
+        .map(move |(ci, ((ks, rs), xs))| {
             let mut h = hist_new();
             let first = (ci * CHUNK) as u64;
             for (i, ((k, r), x)) in ks.iter_mut().zip(rs).zip(xs.iter_mut()).enumerate() {
@@ -187,7 +272,7 @@ pub fn build(
                     | (SPREAD[q[1] as usize & 1023] << 1)
                     | SPREAD[q[2] as usize & 1023];
                 *k = (code as u64) << 32 | (first + i as u64);
-                h[code as usize & (BUCKETS - 1)] += 1;
+                h[(code >> first_digit) as usize & (BUCKETS - 1)] += 1;
             }
             h
         })
@@ -197,19 +282,7 @@ pub fn build(
             }
             a
         });
-    // LSD radix sort by the code (the position keeps equal codes in input order), each pass
-    // counting the next digit: keys -> tmp -> keys -> tmp.
-    let (mut h1, mut h2) = (hist_new(), hist_new());
-    starts(&mut h0);
-    scatter::<true>(keys, tmp, &mut h0, 32, &mut h1, 32 + DIGIT);
-    starts(&mut h1);
-    scatter::<true>(tmp, keys, &mut h1, 32 + DIGIT, &mut h2, 32 + TOP_SHIFT);
-    starts(&mut h2);
-    // Where each top digit starts in the sorted order (and the end): the split points of the
-    // top levels, read off instead of searched for.
-    let mut top = h2.to_vec();
-    top.push(n as u32);
-    scatter::<false>(keys, tmp, &mut h2, 32 + TOP_SHIFT, &mut h1, 0);
+    let top = sort(keys, tmp, h, msd);
     let ctx = Ctx {
         keys: tmp,
         aux,
@@ -383,5 +456,50 @@ impl Ctx<'_> {
         }
         out.set(me, node);
         (bounds, Child::Inner(me))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both sorts (from the top digit, from the lowest) give the keys in order.
+    #[test]
+    fn radix_sorts_sort() {
+        let mut seed = 0x2545_f491u32;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed
+        };
+        for (n, clustered) in [(1000, false), (MSD_MIN + 5, false), (MSD_MIN + 5, true)] {
+            let keys: Vec<u64> = (0..n)
+                .map(|i| {
+                    // Clustered codes fill few top buckets, some far beyond SMALL_SORT.
+                    let c = rnd() & ((1 << 30) - 1);
+                    let c = if clustered { c & 0x0303_ffff } else { c };
+                    (c as u64) << 32 | i as u64
+                })
+                .collect();
+            let mut want = keys.clone();
+            want.sort_unstable();
+            for msd in [false, true] {
+                let digit = if msd { TOP_SHIFT } else { 0 };
+                let mut h = hist_new();
+                for k in &keys {
+                    h[(k >> (32 + digit)) as usize & (BUCKETS - 1)] += 1;
+                }
+                let (mut k, mut t) = (keys.clone(), vec![0; n]);
+                let top = sort(&mut k, &mut t, h, msd);
+                assert_eq!(t, want, "n {n} msd {msd}");
+                for (d, w) in top.windows(2).enumerate() {
+                    for k in &want[w[0] as usize..w[1] as usize] {
+                        assert_eq!((k >> (32 + TOP_SHIFT)) as usize, d);
+                    }
+                }
+                assert_eq!(top.last(), Some(&(n as u32)));
+            }
+        }
     }
 }
