@@ -1,17 +1,21 @@
 //! Fast builder: sort primitives by the Morton code of their centroid (radix sort), then split
 //! each range at the highest bit in which its first and last codes differ (a top-down LBVH),
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
+//!
+//! The passes: centroid bounds; keys `(code, position)` with the lowest digit's histogram, the
+//! references copied into `aux` on the way; three radix passes, each counting the next digit;
+//! the tree, whose leaves gather their references from `aux` in sorted order into `refs` (their
+//! final place) while computing their bounds.
 
-use super::binned_sah::RangeInfo;
-use super::tree::{self, Child, NodeList, Tree, node_hint};
+use super::tree::{Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
-use crate::layout::{Node, WIDTH};
-use crate::math::{Aabb, fmax, fmin};
+use crate::layout::{LEAF_BIT, Node, WIDTH};
+use crate::math::Aabb;
 use rayon::prelude::*;
+use wide::f32x4;
 
 /// Spreads the low 10 bits of `v` to every third bit.
-#[inline(always)]
-fn spread(v: u32) -> u32 {
+const fn spread(v: u32) -> u32 {
     let mut x = v & 0x3ff;
     x = (x | (x << 16)) & 0x0300_00ff;
     x = (x | (x << 8)) & 0x0300_f00f;
@@ -20,31 +24,206 @@ fn spread(v: u32) -> u32 {
     x
 }
 
+/// `spread` of every 10-bit value.
+static SPREAD: [u32; 1024] = {
+    let mut t = [0u32; 1024];
+    let mut i = 0;
+    while i < 1024 {
+        t[i] = spread(i as u32);
+        i += 1;
+    }
+    t
+};
+
 /// Bits per radix-sort digit: three passes over the 30 code bits.
 const DIGIT: u32 = 10;
 const BUCKETS: usize = 1 << DIGIT;
 /// Shift of the top digit (code bits 20..30).
 const TOP_SHIFT: u32 = 2 * DIGIT;
-/// Keys are made in chunks of this many, each counting its own digit histograms.
-const KEY_CHUNK: usize = PARALLEL_THRESHOLD * 16;
+/// The linear passes work in chunks of this many references.
+const CHUNK: usize = PARALLEL_THRESHOLD * 16;
 
 /// Ranges up to this size find their split point by counting, not by a binary search.
 const LINEAR_SPLIT: usize = 256;
 
-/// The three digit histograms of a set of codes.
-type Hist = Vec<[u32; BUCKETS]>;
-
-fn hist_new() -> Hist {
-    vec![[0u32; BUCKETS]; 3]
+/// A box as two vectors (lane 3 unused).
+#[derive(Clone, Copy)]
+struct Bounds {
+    lo: f32x4,
+    hi: f32x4,
 }
 
-fn hist_add(mut a: Hist, b: Hist) -> Hist {
-    for (x, y) in a.iter_mut().zip(&b) {
-        for (c, d) in x.iter_mut().zip(y) {
-            *c += d;
+impl Bounds {
+    const EMPTY: Bounds = Bounds {
+        lo: f32x4::splat(f32::INFINITY),
+        hi: f32x4::splat(f32::NEG_INFINITY),
+    };
+    /// `minps`/`maxps` with the operand order of `Aabb::union`.
+    #[inline(always)]
+    fn union(self, o: Bounds) -> Bounds {
+        Bounds {
+            lo: self.lo.fast_min(o.lo),
+            hi: self.hi.fast_max(o.hi),
         }
     }
-    a
+    #[inline(always)]
+    fn of(r: &PrimRef) -> Bounds {
+        let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
+        Bounds {
+            lo: f32x4::from(lo),
+            hi: f32x4::from(hi),
+        }
+    }
+    fn aabb(&self) -> Aabb {
+        let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
+        Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        }
+    }
+}
+
+/// Keeps lanes 0..3 (lane 3 of a reference holds the id or pad bits).
+const XYZ: f32x4 = f32x4::new([
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    0.0,
+]);
+
+/// The doubled centroid of `r` (`lo + hi`), lane 3 zero.
+#[inline(always)]
+fn center2(r: &PrimRef) -> f32x4 {
+    let [lo, hi]: [f32x4; 2] = bytemuck::cast(*r);
+    (lo & XYZ) + (hi & XYZ)
+}
+
+/// Bounds of the doubled centroids, over fixed chunks combined in order.
+fn centroid_bounds(refs: &[PrimRef]) -> Bounds {
+    let part = |rs: &[PrimRef]| {
+        let mut b = Bounds::EMPTY;
+        for r in rs {
+            let c = center2(r);
+            b = b.union(Bounds { lo: c, hi: c });
+        }
+        b
+    };
+    if refs.len() <= CHUNK {
+        return part(refs);
+    }
+    let parts: Vec<Bounds> = refs.par_chunks(CHUNK).map(part).collect();
+    parts.into_iter().fold(Bounds::EMPTY, Bounds::union)
+}
+
+/// Digit histograms (bucket counts, then bucket starts).
+type Hist = Box<[u32; BUCKETS]>;
+
+fn hist_new() -> Hist {
+    Box::new([0; BUCKETS])
+}
+
+/// Turns counts into starts.
+fn starts(h: &mut [u32; BUCKETS]) {
+    let mut sum = 0;
+    for c in h.iter_mut() {
+        let v = *c;
+        *c = sum;
+        sum += v;
+    }
+}
+
+/// One radix pass: `src` scattered into `dst` by the digit at `shift` (`at` holds the bucket
+/// starts), `each` seeing every key (to count the next digit).
+#[inline(always)]
+fn scatter(
+    src: &[u64],
+    dst: &mut [u64],
+    at: &mut [u32; BUCKETS],
+    shift: u32,
+    mut each: impl FnMut(u64),
+) {
+    for &k in src {
+        let b = (k >> shift) as usize & (BUCKETS - 1);
+        let p = at[b];
+        if let Some(d) = dst.get_mut(p as usize) {
+            *d = k;
+        }
+        at[b] = p + 1;
+        each(k);
+    }
+}
+
+/// Counts the digit at `shift` of `k` into `h`.
+#[inline(always)]
+fn count(h: &mut [u32; BUCKETS], shift: u32) -> impl FnMut(u64) + '_ {
+    move |k| h[(k >> shift) as usize & (BUCKETS - 1)] += 1
+}
+
+/// Inputs of at least this many primitives sort by the top digit first.
+const MSD_MIN: usize = 1 << 17;
+/// Top buckets up to this size are sorted by comparison.
+const SMALL_SORT: usize = 96;
+
+/// Sorts `keys` (one top bucket) by the two lower code digits, with `tmp` (as long) as
+/// working space.
+fn sort_low(keys: &mut [u64], tmp: &mut [u64]) {
+    if keys.len() <= SMALL_SORT {
+        keys.sort_unstable();
+        return;
+    }
+    let (mut h0, mut h1) = ([0u32; BUCKETS], [0u32; BUCKETS]);
+    for &k in keys.iter() {
+        h0[(k >> 32) as usize & (BUCKETS - 1)] += 1;
+        h1[(k >> (32 + DIGIT)) as usize & (BUCKETS - 1)] += 1;
+    }
+    starts(&mut h0);
+    starts(&mut h1);
+    scatter(keys, tmp, &mut h0, 32, |_| {});
+    scatter(tmp, keys, &mut h1, 32 + DIGIT, |_| {});
+}
+
+/// Sorts `keys` into `tmp` (both changed), given the counts of the first digit sorted by
+/// (the top one when `msd`, else the lowest). Returns where each top digit starts in the
+/// sorted order, then the length: the split points of the top levels, read off instead of
+/// searched for.
+fn sort(keys: &mut [u64], tmp: &mut [u64], mut h: Hist, msd: bool) -> Vec<u32> {
+    let n = keys.len();
+    starts(&mut h);
+    let mut top;
+    if msd {
+        top = h.to_vec();
+        top.push(n as u32);
+        scatter(keys, tmp, &mut h, 32 + TOP_SHIFT, |_| {});
+        let mut buckets = Vec::with_capacity(BUCKETS);
+        let (mut a, mut t) = (&mut tmp[..], &mut keys[..]);
+        for w in top.windows(2) {
+            let m = (w[1] - w[0]) as usize;
+            let (x, a2) = std::mem::take(&mut a).split_at_mut(m);
+            let (y, t2) = std::mem::take(&mut t).split_at_mut(m);
+            buckets.push((x, y));
+            (a, t) = (a2, t2);
+        }
+        buckets
+            .into_par_iter()
+            .with_min_len(BUCKETS / 16)
+            .for_each(|(x, y)| sort_low(x, y));
+    } else {
+        let (mut h1, mut h2) = (hist_new(), hist_new());
+        scatter(keys, tmp, &mut h, 32, count(&mut h1, 32 + DIGIT));
+        starts(&mut h1);
+        scatter(
+            tmp,
+            keys,
+            &mut h1,
+            32 + DIGIT,
+            count(&mut h2, 32 + TOP_SHIFT),
+        );
+        starts(&mut h2);
+        top = h2.to_vec();
+        top.push(n as u32);
+        scatter(keys, tmp, &mut h2, 32 + TOP_SHIFT, |_| {});
+    }
+    top
 }
 
 pub fn build(
@@ -59,249 +238,268 @@ pub fn build(
     if n == 0 {
         return NodeList::new(nodes).tree(None);
     }
-    let info = RangeInfo::of(refs);
-    let c = info.centroids;
-    let scale = [0, 1, 2].map(|k| {
-        let ext = c.hi[k] - c.lo[k];
-        if ext > 0.0 { 1023.0 / ext } else { 0.0 }
-    });
-    let code = |r: &PrimRef| {
-        let p = r.center2();
-        let q = [0, 1, 2].map(|k| (((p[k] - c.lo[k]) * scale[k]) as u32).min(1023)); // NaN gives 0
-        (spread(q[0]) << 2) | (spread(q[1]) << 1) | spread(q[2])
-    };
-    // Keys (code, position) and the digit histograms of the codes, in one pass.
+    let c = centroid_bounds(refs);
+    let ext = c.hi - c.lo;
+    let scale = f32x4::from(
+        ext.to_array()
+            .map(|e| if e > 0.0 { 1023.0 / e } else { 0.0 }),
+    );
+    let lo = c.lo;
+    // Keys (code, position) and the histogram of the first digit sorted by, copying the
+    // references into `aux` on the way. Centroids lie in the bounds, so the scaled values are in [0, 1023]
+    // (up to rounding below 1024); NaN converts to i32::MIN, whose low bits are 0.
     let keys = &mut keys[..n];
-    let mut counts = keys
-        .par_chunks_mut(KEY_CHUNK)
-        .zip(refs.par_chunks(KEY_CHUNK))
+    let tmp = &mut tmp[..n];
+    let aux = &mut aux[..n];
+    // Large inputs are sorted by the top digit first (one pass through memory) and then each
+    // top bucket by the two lower digits where it sits in the caches; small ones by three
+    // passes from the lowest digit, each counting the next. Both sort by the whole key, whose
+    // low half (the position) keeps equal codes in input order.
+    let msd = n >= MSD_MIN;
+    let first_digit = if msd { TOP_SHIFT } else { 0 };
+    let h = keys
+        .par_chunks_mut(CHUNK)
+        .zip(refs.par_chunks(CHUNK))
+        .zip(aux.par_chunks_mut(CHUNK))
         .enumerate()
-        .map(|(ci, (ks, rs))| {
+        .map(move |(ci, ((ks, rs), xs))| {
             let mut h = hist_new();
-            let first = ci * KEY_CHUNK;
-            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
-                let c = code(r);
-                *k = (c as u64) << 32 | (first + i) as u64;
-                let c = c as usize;
-                h[0][c & (BUCKETS - 1)] += 1;
-                h[1][(c >> DIGIT) & (BUCKETS - 1)] += 1;
-                h[2][(c >> TOP_SHIFT) & (BUCKETS - 1)] += 1;
+            let first = (ci * CHUNK) as u64;
+            for (i, ((k, r), x)) in ks.iter_mut().zip(rs).zip(xs.iter_mut()).enumerate() {
+                *x = *r;
+                let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
+                let code = (SPREAD[q[0] as usize & 1023] << 2)
+                    | (SPREAD[q[1] as usize & 1023] << 1)
+                    | SPREAD[q[2] as usize & 1023];
+                *k = (code as u64) << 32 | (first + i as u64);
+                h[(code >> first_digit) as usize & (BUCKETS - 1)] += 1;
             }
             h
         })
-        .reduce(hist_new, hist_add);
-    for h in counts.iter_mut() {
-        let mut sum = 0;
-        for c in h.iter_mut() {
-            let v = *c;
-            *c = sum;
-            sum += v;
-        }
-    }
-    // Where each top digit starts in the sorted order (and the end): the split points of the
-    // top levels, read off instead of searched for.
-    let mut top = counts[2].to_vec();
-    top.push(n as u32);
-    // LSD radix sort by the code (the position keeps equal codes in input order): three
-    // passes, keys -> tmp -> keys -> tmp.
-    for (pass, h) in counts.iter_mut().enumerate() {
-        let shift = 32 + DIGIT * pass as u32;
-        let (src, dst): (&[u64], &mut [u64]) = if pass == 1 {
-            (&tmp[..n], keys)
-        } else {
-            (keys, &mut tmp[..n])
-        };
-        for &k in src {
-            let b = (k >> shift) as usize & (BUCKETS - 1);
-            if let Some(d) = dst.get_mut(h[b] as usize) {
-                *d = k;
+        .reduce(hist_new, |mut a, b| {
+            for (x, y) in a.iter_mut().zip(b.iter()) {
+                *x += y;
             }
-            h[b] += 1;
-        }
-    }
-    // The references in sorted order into `aux` (so leaves read their bounds sequentially)
-    // and the sorted codes, for splitting, into `keys` (free now), in one pass.
-    let sorted = &tmp[..n];
-    let codes: &mut [u32] = &mut bytemuck::cast_slice_mut(keys)[..n];
-    let refs_in = &*refs;
-    aux[..n]
-        .par_chunks_mut(KEY_CHUNK)
-        .zip(codes.par_chunks_mut(KEY_CHUNK))
-        .zip(sorted.par_chunks(KEY_CHUNK))
-        .for_each(|((a, c), s)| {
-            for ((a, c), k) in a.iter_mut().zip(c.iter_mut()).zip(s) {
-                *a = refs_in[(*k & 0xffff_ffff) as usize];
-                *c = (*k >> 32) as u32;
-            }
+            a
         });
-    let codes = &*codes;
+    let top = sort(keys, tmp, h, msd);
+    let ctx = Ctx {
+        keys: tmp,
+        aux,
+        top: &top,
+        leaf_max: max_leaf.max(WIDTH - 1),
+    };
     let mut out = NodeList::new(nodes);
-    // The leaves copy the sorted references back into `refs` as they read their bounds.
-    let src = &aux[..n];
-    let root = build_child(src, refs, codes, &top, 0, max_leaf.max(4), 0, &mut out);
-    out.tree(Some(root))
+    let (b, c) = ctx.build(0, refs, 0, &mut out);
+    out.tree(Some((b.aabb(), c)))
 }
 
-/// Position of the first code in `codes` that differs from the first in the highest differing
-/// bit, or the middle when all codes are equal. `codes` start at position `base` of the sorted
-/// codes, and `top` says where each top digit starts there: splits on a top-digit bit are
-/// looked up, not searched for (the searches at the top levels miss the caches).
-fn split_point(codes: &[u32], base: usize, top: &[u32]) -> usize {
-    let (first, last) = (codes[0], codes[codes.len() - 1]);
+/// What every level of the tree reads.
+struct Ctx<'a> {
+    /// Sorted keys: code in the high half, position in `aux` in the low half.
+    keys: &'a [u64],
+    /// The references in input order.
+    aux: &'a [PrimRef],
+    /// Start of each top digit in the sorted order, then `n`.
+    top: &'a [u32],
+    /// Ranges up to this size become leaves.
+    leaf_max: usize,
+}
+
+/// Position of the first key in `keys` whose code differs from the first code in the highest
+/// differing bit, or the middle when all codes are equal. `keys` start at position `base` of
+/// the sorted keys, and `top` says where each top digit starts there: splits on a top-digit bit
+/// are looked up, not searched for (the searches at the top levels miss the caches).
+fn split_point(keys: &[u64], base: usize, top: &[u32]) -> usize {
+    let (first, last) = ((keys[0] >> 32) as u32, (keys[keys.len() - 1] >> 32) as u32);
     if first == last {
-        return codes.len() / 2;
+        return keys.len() / 2;
     }
     let bit = 31 - (first ^ last).leading_zeros();
-    let mask = !((1u32 << bit) - 1);
-    let prefix = first & mask;
+    // The right half starts at the first code of at least `first`'s prefix with the bit set
+    // (its lower bits zero).
+    let right = (first & !((1u32 << bit) - 1)) | 1 << bit;
     if bit >= TOP_SHIFT {
-        // Codes before `base` are at most `first`, those from the split on at least
-        // `prefix | 1 << bit`, whose low digits are zero: the split is where that digit starts.
-        let digit = ((prefix | 1 << bit) >> TOP_SHIFT) as usize;
-        if let Some(&at) = top.get(digit) {
-            return (at as usize).saturating_sub(base).min(codes.len());
+        // Codes before `base` are at most `first`: the split is where that top digit starts.
+        if let Some(&at) = top.get((right >> TOP_SHIFT) as usize) {
+            return (at as usize).saturating_sub(base).min(keys.len());
         }
     }
-    // codes are sorted: the first one with the bit set starts the right half. Small ranges
-    // count the codes without it (no chain of dependent loads, and it vectorizes).
-    if codes.len() <= LINEAR_SPLIT {
-        return codes.iter().filter(|&&c| (c & mask) == prefix).count();
+    let t = (right as u64) << 32;
+    // Small ranges count the keys below it (no chain of dependent loads, and it vectorizes).
+    if keys.len() <= LINEAR_SPLIT {
+        return keys.iter().filter(|&&k| k < t).count();
     }
-    codes.partition_point(|&c| (c & mask) == prefix)
+    keys.partition_point(|&k| k < t)
 }
 
-/// A leaf over `src` (at positions `base..`), copied into `dst`.
+/// A leaf over sorted positions `keys`: gathers the references into `dst` and returns their
+/// bounds.
 #[inline(always)]
-fn leaf(src: &[PrimRef], dst: &mut [PrimRef], base: u32) -> (Aabb, Child) {
-    // Four lanes at a time (lane 3 holds the id and is dropped): `minps`/`maxps`, with the
-    // operand order of `Aabb::union`.
-    let (mut lo, mut hi) = ([f32::INFINITY; 4], [f32::NEG_INFINITY; 4]);
-    for (d, r) in dst.iter_mut().zip(src) {
-        *d = *r;
-        let [rl, rh]: [[f32; 4]; 2] = bytemuck::cast(*r);
-        for k in 0..4 {
-            lo[k] = fmin(lo[k], rl[k]);
-            hi[k] = fmax(hi[k], rh[k]);
-        }
+fn leaf(keys: &[u64], aux: &[PrimRef], dst: &mut [PrimRef]) -> Bounds {
+    let mut b = Bounds::EMPTY;
+    for (d, &k) in dst.iter_mut().zip(keys) {
+        let r = aux[k as u32 as usize];
+        *d = r;
+        b = b.union(Bounds::of(&r));
     }
-    let b = Aabb {
-        lo: [lo[0], lo[1], lo[2]],
-        hi: [hi[0], hi[1], hi[2]],
-    };
-    let c = Child::Leaf {
-        first: base,
-        count: src.len() as u32,
-    };
-    (b, c)
+    b
 }
 
-/// Builds the subtree over `src` (sorted references at positions `base..`), copying them into
-/// `dst` as its leaves read them.
-#[allow(clippy::too_many_arguments)]
-fn build_child(
-    src: &[PrimRef],
-    dst: &mut [PrimRef],
-    codes: &[u32],
-    top: &[u32],
-    base: u32,
-    max_leaf: usize,
-    depth: u32,
-    out: &mut NodeList,
-) -> (Aabb, Child) {
-    let n = src.len();
-    if n <= max_leaf.max(WIDTH - 1) {
-        return leaf(src, dst, base);
+/// Writes child `k` of `node`.
+#[inline(always)]
+fn set_child(node: &mut Node, k: usize, b: &Bounds, c: Child) {
+    let (lo, hi) = (b.lo.to_array(), b.hi.to_array());
+    node.lo_x[k] = lo[0];
+    node.lo_y[k] = lo[1];
+    node.lo_z[k] = lo[2];
+    node.hi_x[k] = hi[0];
+    node.hi_y[k] = hi[1];
+    node.hi_z[k] = hi[2];
+    match c {
+        Child::Leaf { first, count } => {
+            node.child[k] = LEAF_BIT | first;
+            node.count[k] = count as u8;
+        }
+        Child::Inner(i) => node.child[k] = i,
     }
-    let mut parts = [(0usize, 0usize); WIDTH];
-    parts[0] = (0, n);
-    let mut live = 1;
-    while live < WIDTH {
-        // Split the part with the most primitives (areas are not known top-down), the first
-        // made among equals; parts of one primitive are never split (key 0).
-        let (mut i, mut best) = (0, 0);
-        for (j, &(b, e)) in parts[..live].iter().enumerate() {
-            let key = if e - b >= 2 {
-                (e - b) * WIDTH + (WIDTH - 1 - j)
-            } else {
-                0
+}
+
+impl Ctx<'_> {
+    /// Builds the subtree over sorted positions `base..base + dst.len()`, gathering their
+    /// references into `dst` as its leaves read them.
+    fn build(
+        &self,
+        base: usize,
+        dst: &mut [PrimRef],
+        depth: u32,
+        out: &mut NodeList,
+    ) -> (Bounds, Child) {
+        let n = dst.len();
+        let keys = &self.keys[base..base + n];
+        if n <= self.leaf_max {
+            let c = Child::Leaf {
+                first: base as u32,
+                count: n as u32,
             };
-            if key > best {
-                (i, best) = (j, key);
+            return (leaf(keys, self.aux, dst), c);
+        }
+        // The parts, in position order, by their ends (each starts where the previous ends).
+        let mut ends = [0usize; WIDTH];
+        ends[0] = n;
+        let mut live = 1;
+        while live < WIDTH {
+            // Split the part with the most primitives (areas are not known top-down), the
+            // first among equals; parts of one primitive are never split.
+            let (mut i, mut best, mut b, mut s) = (0, 0, 0, 0);
+            for (j, &e) in ends[..live].iter().enumerate() {
+                if e - s > best {
+                    (i, best, b) = (j, e - s, s);
+                }
+                s = e;
             }
+            if best < 2 {
+                break;
+            }
+            let e = ends[i];
+            let mid = if depth < MEDIAN_DEPTH {
+                split_point(&keys[b..e], base + b, self.top)
+            } else {
+                (e - b) / 2
+            };
+            ends.copy_within(i..live, i + 1);
+            ends[i] = b + mid.clamp(1, e - b - 1);
+            live += 1;
         }
-        if best == 0 {
-            break;
-        }
-        let (b, e) = parts[i];
-        let mid = if depth < MEDIAN_DEPTH {
-            split_point(&codes[b..e], base as usize + b, top)
+        let me = out.reserve();
+        let mut node = Node::EMPTY;
+        let mut bounds = Bounds::EMPTY;
+        if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+            let mut pieces = Vec::with_capacity(live);
+            let (mut rest, mut s) = (dst, 0);
+            for &e in &ends[..live] {
+                let (mine, tail) = std::mem::take(&mut rest).split_at_mut(e - s);
+                pieces.push((s, mine));
+                (rest, s) = (tail, e);
+            }
+            let built: Vec<(Bounds, Child, NodeList)> = pieces
+                .into_par_iter()
+                .map(|(s, d)| {
+                    let mut sub = NodeList::with_capacity(node_hint(d.len()));
+                    let (b, c) = self.build(base + s, d, depth + 1, &mut sub);
+                    (b, c, sub)
+                })
+                .collect();
+            for (k, (b, c, sub)) in built.into_iter().enumerate() {
+                let c = out.append(c, sub);
+                set_child(&mut node, k, &b, c);
+                bounds = bounds.union(b);
+            }
         } else {
-            (e - b) / 2
-        };
-        let mid = mid.clamp(1, e - b - 1);
-        parts[i] = (b, b + mid);
-        parts[live] = (b + mid, e);
-        live += 1;
-    }
-    // Every part made is non-empty: in position order.
-    parts[..live].sort_unstable_by_key(|&(b, _)| b);
-    let me = out.reserve();
-    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
-    // The parts cover `0..n` in order: hand each its piece of `dst`.
-    let mut pieces: [(usize, usize, &mut [PrimRef]); WIDTH] = Default::default();
-    let mut rest = dst;
-    for (piece, &(b, e)) in pieces.iter_mut().zip(&parts[..live]) {
-        let (mine, tail) = std::mem::take(&mut rest).split_at_mut(e - b);
-        *piece = (b, e, mine);
-        rest = tail;
-    }
-    if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
-        let built: Vec<((Aabb, Child), NodeList)> = pieces
-            .into_iter()
-            .take(live)
-            .collect::<Vec<_>>()
-            .into_par_iter()
-            .map(|(b, e, d)| {
-                let mut sub = NodeList::with_capacity(node_hint(e - b));
-                let c = build_child(
-                    &src[b..e],
-                    d,
-                    &codes[b..e],
-                    top,
-                    base + b as u32,
-                    max_leaf,
-                    depth + 1,
-                    &mut sub,
-                );
-                (c, sub)
-            })
-            .collect();
-        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
-            *slot = (b, out.append(c, sub));
-        }
-    } else {
-        for (slot, (b, e, d)) in children.iter_mut().zip(pieces.into_iter().take(live)) {
-            // Leaves inline: a returned child read back at once stalls on store forwarding.
-            if e - b <= max_leaf.max(WIDTH - 1) {
-                *slot = leaf(&src[b..e], d, base + b as u32);
-                continue;
+            let (mut rest, mut s) = (dst, 0);
+            for (k, &e) in ends[..live].iter().enumerate() {
+                let (mine, tail) = std::mem::take(&mut rest).split_at_mut(e - s);
+                // Leaves inline: a returned child read back at once stalls on store forwarding.
+                let (b, c) = if e - s <= self.leaf_max {
+                    let c = Child::Leaf {
+                        first: (base + s) as u32,
+                        count: (e - s) as u32,
+                    };
+                    (leaf(&keys[s..e], self.aux, mine), c)
+                } else {
+                    self.build(base + s, mine, depth + 1, out)
+                };
+                set_child(&mut node, k, &b, c);
+                bounds = bounds.union(b);
+                (rest, s) = (tail, e);
             }
-            *slot = build_child(
-                &src[b..e],
-                d,
-                &codes[b..e],
-                top,
-                base + b as u32,
-                max_leaf,
-                depth + 1,
-                out,
-            );
+        }
+        out.set(me, node);
+        (bounds, Child::Inner(me))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both sorts (from the top digit, from the lowest) give the keys in order.
+    #[test]
+    fn radix_sorts_sort() {
+        let mut seed = 0x2545_f491u32;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed
+        };
+        for (n, clustered) in [(1000, false), (MSD_MIN + 5, false), (MSD_MIN + 5, true)] {
+            let keys: Vec<u64> = (0..n)
+                .map(|i| {
+                    // Clustered codes fill few top buckets, some far beyond SMALL_SORT.
+                    let c = rnd() & ((1 << 30) - 1);
+                    let c = if clustered { c & 0x0303_ffff } else { c };
+                    (c as u64) << 32 | i as u64
+                })
+                .collect();
+            let mut want = keys.clone();
+            want.sort_unstable();
+            for msd in [false, true] {
+                let digit = if msd { TOP_SHIFT } else { 0 };
+                let mut h = hist_new();
+                for k in &keys {
+                    h[(k >> (32 + digit)) as usize & (BUCKETS - 1)] += 1;
+                }
+                let (mut k, mut t) = (keys.clone(), vec![0; n]);
+                let top = sort(&mut k, &mut t, h, msd);
+                assert_eq!(t, want, "n {n} msd {msd}");
+                for (d, w) in top.windows(2).enumerate() {
+                    for k in &want[w[0] as usize..w[1] as usize] {
+                        assert_eq!((k >> (32 + TOP_SHIFT)) as usize, d);
+                    }
+                }
+                assert_eq!(top.last(), Some(&(n as u32)));
+            }
         }
     }
-    let mut bounds = Aabb::EMPTY;
-    for (b, _) in &children[..live] {
-        bounds = bounds.union(b);
-    }
-    out.set(me, tree::node(children.into_iter().take(live)));
-    (bounds, Child::Inner(me))
 }

@@ -7,7 +7,7 @@ use crate::device::{AccelerationStructure, AsObject, Device};
 use crate::error::{Error, Location, Result};
 use crate::input::aabbs::AabbReader;
 use crate::input::instances::{Instance, InstanceReader};
-use crate::input::triangles::TriangleReader;
+use crate::input::triangles::{F32Layout, TriangleReader};
 use crate::input::{BuildGeometryInfo, BuildRangeInfo, GeometryData};
 use crate::layout::encode::{self, HeaderFields};
 use crate::layout::plan::{self, Plan};
@@ -18,6 +18,7 @@ use crate::layout::{
 use crate::math::{Aabb, Affine};
 use ash::vk;
 use rayon::prelude::*;
+use wide::f32x4;
 
 /// `VkAccelerationStructureBuildSizesInfoKHR`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -781,10 +782,6 @@ fn decode_geometries(
         };
         let geom_data = &mut data[first * size..(first + count) * size];
         let geom_refs = &mut refs[first..first + count];
-        let fast = match reader {
-            Reader::Triangles(t) => F32Tris::new(t),
-            _ => None,
-        };
         let results: Vec<Result<usize>> = geom_data
             .par_chunks_mut(CHUNK * size)
             .zip(geom_refs.par_chunks_mut(CHUNK))
@@ -796,22 +793,28 @@ fn decode_geometries(
                     Reader::Triangles(t) => {
                         let outs: &mut [[u8; TRI_BYTES]] = bytemuck::try_cast_slice_mut(chunk)
                             .map_err(|_| internal("triangle slots"))?;
-                        for (j, (out, r)) in outs.iter_mut().zip(chunk_refs.iter_mut()).enumerate()
-                        {
-                            let i = base + j;
-                            let f = match fast.as_ref().and_then(|d| d.get(i)) {
-                                Some(f) => f,
-                                None => reader_triangle(t, i as u32)?,
-                            };
-                            *out = bytemuck::cast(f);
-                            let mut b = Aabb::point([f[0], f[1], f[2]]);
-                            b.grow([f[3], f[4], f[5]]);
-                            b.grow([f[6], f[7], f[8]]);
-                            let dead = f[0].is_nan();
-                            inactive += dead as usize;
-                            *r = PrimRef::new(&b, (first + i) as u32);
-                            r.pad = dead as u32;
-                        }
+                        let first = first + base;
+                        inactive = match F32Tris::new(t) {
+                            Some(F32Tris::I0(d)) => {
+                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            }
+                            Some(F32Tris::I2(d)) => {
+                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            }
+                            Some(F32Tris::I4(d)) => {
+                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            }
+                            Some(F32Tris::I0S(d)) => {
+                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            }
+                            Some(F32Tris::I2S(d)) => {
+                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            }
+                            Some(F32Tris::I4S(d)) => {
+                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            }
+                            None => decode_tris(t, t, base, first, outs, chunk_refs),
+                        }?;
                     }
                     Reader::Aabbs(a) => {
                         let outs = chunk.chunks_exact_mut(24);
@@ -856,83 +859,191 @@ fn decode_geometries(
     Ok(stored)
 }
 
-/// Triangle `i` through the reader, every format and error handled (inactive: NaNs).
-#[cold]
-#[inline(never)]
-fn reader_triangle(t: &TriangleReader, i: u32) -> Result<[f32; 9]> {
-    Ok(match t.triangle_fast(i) {
-        Some(f) if !(f[0].is_nan() || f[3].is_nan() || f[6].is_nan()) => f,
-        _ => match t.triangle(i)? {
-            Some(v) => [
-                v[0][0], v[0][1], v[0][2], v[1][0], v[1][1], v[1][2], v[2][0], v[2][1], v[2][2],
-            ],
-            None => [f32::NAN; 9],
-        },
-    })
+/// Triangles of one geometry as three vertices (lane 3 unspecified): `None` where the reader
+/// must decide (inactive, out of range, an unusual layout).
+trait TriSource {
+    fn get(&self, p: usize) -> Option<[f32x4; 3]>;
 }
 
-/// An `R32G32B32_SFLOAT` triangle geometry without a transform, its format and layout
-/// checked once instead of per triangle (the decode loop's common case).
-struct F32Tris<'a> {
-    /// 0 (no indices), 2 or 4.
-    index_size: usize,
-    index: &'a [u8],
-    verts: &'a [u8],
+/// A vertex in lanes 0..3 (lane 3 zero).
+#[inline(always)]
+fn lanes(v: [f32; 3]) -> f32x4 {
+    f32x4::from([v[0], v[1], v[2], 0.0])
+}
+
+impl TriSource for TriangleReader<'_> {
+    #[inline(always)]
+    fn get(&self, p: usize) -> Option<[f32x4; 3]> {
+        let f = self.triangle_fast(p as u32)?;
+        if f[0].is_nan() || f[3].is_nan() || f[6].is_nan() {
+            return None;
+        }
+        Some([0, 3, 6].map(|k| lanes([f[k], f[k + 1], f[k + 2]])))
+    }
+}
+
+/// The vertices of an `R32G32B32_SFLOAT` geometry, read 16 bytes at a time (lane 3 is the
+/// next float): `0..count`, every vertex up to maxVertex whose 16 bytes lie in the buffer.
+#[derive(Clone, Copy)]
+struct F32Verts<'a> {
+    data: &'a [u8],
     stride: usize,
+    count: usize,
+}
+
+impl F32Verts<'_> {
+    /// Vertex `v < count`.
+    #[inline(always)]
+    fn vertex(&self, v: usize) -> Option<f32x4> {
+        let at = v.wrapping_mul(self.stride);
+        Some(bytemuck::pod_read_unaligned(
+            self.data.get(at..at.wrapping_add(16))?,
+        ))
+    }
+}
+
+/// An `R32G32B32_SFLOAT` geometry without a transform whose buffers hold every vertex up to
+/// maxVertex, its layout read once: `IDX`-byte indices (0: none), `STRIDE` bytes between
+/// vertices (0: any).
+#[derive(Clone, Copy)]
+struct F32Geometry<'a, const IDX: usize, const STRIDE: usize> {
+    /// From `primitiveOffset` (indexed geometries).
+    index: &'a [u8],
+    verts: F32Verts<'a>,
     first_vertex: usize,
-    max_vertex: usize,
+}
+
+enum F32Tris<'a> {
+    I0(F32Geometry<'a, 0, 12>),
+    I2(F32Geometry<'a, 2, 12>),
+    I4(F32Geometry<'a, 4, 12>),
+    I0S(F32Geometry<'a, 0, 0>),
+    I2S(F32Geometry<'a, 2, 0>),
+    I4S(F32Geometry<'a, 4, 0>),
 }
 
 impl<'a> F32Tris<'a> {
-    fn new(t: &TriangleReader<'a>) -> Option<F32Tris<'a>> {
-        let l = t.f32_layout()?;
-        if l.transform.is_some() || !matches!(l.index_size, 0 | 2 | 4) {
+    /// `None` where the reader decodes (another format, a transform, short vertex data).
+    fn new(t: &TriangleReader<'a>) -> Option<Self> {
+        // (Vertices are read as native floats 16 bytes at a time.)
+        if cfg!(target_endian = "big") {
             return None;
         }
-        Some(F32Tris {
-            index_size: l.index_size,
-            index: l.index_data,
-            verts: l.vertex_data,
+        let l = t.f32_layout()?;
+        if l.transform.is_some() {
+            return None;
+        }
+        // Vertices up to maxVertex must be in the buffer; the last one is read 16 bytes at a
+        // time only when 4 more bytes follow (otherwise triangles using it go to the reader).
+        let end = l.max_vertex.checked_mul(l.vertex_stride)?.checked_add(12)?;
+        let (data, count) = match l.vertex_data.get(..end + 4) {
+            Some(d) => (d, l.max_vertex + 1),
+            None => (l.vertex_data.get(..end)?, l.max_vertex),
+        };
+        let verts = F32Verts {
+            data,
             stride: l.vertex_stride,
-            first_vertex: l.first_vertex,
-            max_vertex: l.max_vertex,
+            count,
+        };
+        fn g<'a, const IDX: usize, const STRIDE: usize>(
+            l: &F32Layout<'a>,
+            verts: F32Verts<'a>,
+        ) -> F32Geometry<'a, IDX, STRIDE> {
+            F32Geometry {
+                index: l.index_data,
+                verts,
+                first_vertex: l.first_vertex,
+            }
+        }
+        Some(match (l.index_size, l.vertex_stride == 12) {
+            (0, true) => F32Tris::I0(g(&l, verts)),
+            (2, true) => F32Tris::I2(g(&l, verts)),
+            (_, true) => F32Tris::I4(g(&l, verts)),
+            (0, false) => F32Tris::I0S(g(&l, verts)),
+            (2, false) => F32Tris::I2S(g(&l, verts)),
+            (_, false) => F32Tris::I4S(g(&l, verts)),
         })
     }
+}
 
-    /// Triangle `p` of the range as nine floats, as `TriangleReader::triangle_fast` reads it,
-    /// when it is active and in range; `None` sends it through the reader (which also says
-    /// what is wrong).
+impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, STRIDE> {
     #[inline(always)]
-    fn get(&self, p: usize) -> Option<[f32; 9]> {
-        let idx = match self.index_size {
-            0 => [3 * p, 3 * p + 1, 3 * p + 2],
-            2 => {
-                let b: &[u8; 6] = self.index.get(6 * p..6 * p + 6)?.try_into().ok()?;
-                let at = |k: usize| u16::from_le_bytes([b[k], b[k + 1]]) as usize;
-                [at(0), at(2), at(4)]
-            }
-            _ => {
-                let b: &[u8; 12] = self.index.get(12 * p..12 * p + 12)?.try_into().ok()?;
-                let at = |k: usize| u32::from_le_bytes([b[k], b[k + 1], b[k + 2], b[k + 3]]);
-                [at(0) as usize, at(4) as usize, at(8) as usize]
+    fn get(&self, p: usize) -> Option<[f32x4; 3]> {
+        let u = |b: &[u8], k: usize| -> usize {
+            if IDX == 2 {
+                u16::from_le_bytes([b[2 * k], b[2 * k + 1]]) as usize
+            } else {
+                u32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]) as usize
             }
         };
+        let idx = if IDX == 0 {
+            [3 * p, 3 * p + 1, 3 * p + 2]
+        } else {
+            let b = self.index.get(3 * IDX * p..3 * IDX * (p + 1))?;
+            [u(b, 0), u(b, 1), u(b, 2)]
+        };
         let fv = self.first_vertex;
-        let idx = [idx[0] + fv, idx[1] + fv, idx[2] + fv];
-        if idx[0].max(idx[1]).max(idx[2]) > self.max_vertex {
+        let v = [
+            idx[0].wrapping_add(fv),
+            idx[1].wrapping_add(fv),
+            idx[2].wrapping_add(fv),
+        ];
+        if v[0].max(v[1]).max(v[2]) >= self.verts.count {
             return None;
         }
-        let mut out = [0f32; 9];
-        for k in 0..3 {
-            let at = idx[k].checked_mul(self.stride)?;
-            let b: &[u8; 12] = self.verts.get(at..at.checked_add(12)?)?.try_into().ok()?;
-            let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
-            out[3 * k] = f(0);
-            out[3 * k + 1] = f(4);
-            out[3 * k + 2] = f(8);
+        let mut verts = self.verts;
+        if STRIDE != 0 {
+            verts.stride = STRIDE;
         }
-        (!(out[0].is_nan() || out[3].is_nan() || out[6].is_nan())).then_some(out)
+        let (a, b, c) = (
+            verts.vertex(v[0])?,
+            verts.vertex(v[1])?,
+            verts.vertex(v[2])?,
+        );
+        // (One test on whole vectors, so that each vertex stays one load.)
+        if (a.is_nan() | b.is_nan() | c.is_nan()).to_bitmask() & 1 != 0 {
+            return None;
+        }
+        Some([a, b, c])
     }
+}
+
+/// Decodes triangles `base..` of `t` into `outs` and their references (sequence numbers from
+/// `first`) into `refs`; returns how many are inactive. `s` decodes the common cases, the
+/// reader the others (and reports what is wrong).
+#[inline(always)]
+fn decode_tris(
+    s: &impl TriSource,
+    t: &TriangleReader,
+    base: usize,
+    first: usize,
+    outs: &mut [[u8; TRI_BYTES]],
+    refs: &mut [PrimRef],
+) -> Result<usize> {
+    let mut inactive = 0;
+    for (j, (out, r)) in outs.iter_mut().zip(refs.iter_mut()).enumerate() {
+        let [a, b, c] = match s.get(base + j) {
+            Some(v) => v,
+            None => match t.triangle((base + j) as u32)? {
+                Some(v) => v.map(lanes),
+                None => [f32x4::splat(f32::NAN); 3],
+            },
+        };
+        // The three vertices, each store overwriting the previous one's lane 3.
+        let bytes = |v: f32x4| -> [u8; 16] { bytemuck::cast(v) };
+        out[..16].copy_from_slice(&bytes(a));
+        out[12..28].copy_from_slice(&bytes(b));
+        out[24..].copy_from_slice(&bytes(c)[..12]);
+        // The bounds as `Aabb::point` and `grow` make them (`minps`/`maxps`, same operands).
+        let mut lo = a.fast_min(b).fast_min(c).to_array();
+        let mut hi = a.fast_max(b).fast_max(c).to_array();
+        let dead = a.as_array()[0].is_nan();
+        inactive += dead as usize;
+        lo[3] = f32::from_bits((first + j) as u32);
+        hi[3] = f32::from_bits(dead as u32);
+        *r = bytemuck::cast([lo, hi]);
+    }
+    Ok(inactive)
 }
 
 fn internal(what: &str) -> Error {
