@@ -941,14 +941,36 @@ impl<S: Source> Walk<'_, '_, S> {
             total = (min4(total.0, b.0), max4(total.1, b.1));
         }
         let node = self.nodes.get_mut(li)?;
-        for (k, (lo, hi)) in boxes.iter().enumerate() {
-            if child[k] != EMPTY_CHILD {
-                node.lo_x[k] = lo[0];
-                node.lo_y[k] = lo[1];
-                node.lo_z[k] = lo[2];
-                node.hi_x[k] = hi[0];
-                node.hi_y[k] = hi[1];
-                node.hi_z[k] = hi[2];
+        if child.contains(&EMPTY_CHILD) {
+            for (k, (lo, hi)) in boxes.iter().enumerate() {
+                if child[k] != EMPTY_CHILD {
+                    node.lo_x[k] = lo[0];
+                    node.lo_y[k] = lo[1];
+                    node.lo_z[k] = lo[2];
+                    node.hi_x[k] = hi[0];
+                    node.hi_y[k] = hi[1];
+                    node.hi_z[k] = hi[2];
+                }
+            }
+        } else {
+            // A full node (every inner node the encoder writes): the same values, transposed
+            // four children at a time instead of stored one by one.
+            for half in 0..WIDTH / 4 {
+                let four = |corner: fn(&Lanes) -> [f32; 4]| {
+                    f32x4::transpose(std::array::from_fn(|j| {
+                        f32x4::new(corner(&boxes[4 * half + j]))
+                    }))
+                    .map(|v| v.to_array())
+                };
+                let [lx, ly, lz, _] = four(|b| b.0);
+                let [hx, hy, hz, _] = four(|b| b.1);
+                let at = 4 * half..4 * half + 4;
+                node.lo_x[at.clone()].copy_from_slice(&lx);
+                node.lo_y[at.clone()].copy_from_slice(&ly);
+                node.lo_z[at.clone()].copy_from_slice(&lz);
+                node.hi_x[at.clone()].copy_from_slice(&hx);
+                node.hi_y[at.clone()].copy_from_slice(&hy);
+                node.hi_z[at].copy_from_slice(&hz);
             }
         }
         Some(total)
