@@ -407,7 +407,10 @@ impl Ctx<'_> {
             } else {
                 (e - b) / 2
             };
-            ends.copy_within(i..live, i + 1);
+            // (A loop: `copy_within` is a call to memmove.)
+            for j in (i..live).rev() {
+                ends[j + 1] = ends[j];
+            }
             ends[i] = b + mid.clamp(1, e - b - 1);
             live += 1;
         }

@@ -1063,39 +1063,53 @@ fn write_prims(
     let (head, ids_part) = bytes.split_at_mut(h.prim_ids_offset as usize);
     let ids: &mut [u32] = bytemuck::try_cast_slice_mut(&mut ids_part[..4 * n])
         .map_err(|e| Error::NotSupported(format!("alignment: {e}")))?;
-    ids.par_iter_mut()
-        .zip(refs.par_iter())
-        .with_min_len(4096)
-        .for_each(|(o, r)| *o = r.id);
     let prims = &mut head[h.prims_offset as usize..h.prims_offset as usize + size * n];
-    // Fixed-size copies (a copy of a run-time length is a call per primitive).
-    fn gather<const S: usize>(prims: &mut [u8], refs: &[PrimRef], data: &[u8]) {
+    // Ids and primitives in one pass over the references, in chunks; fixed-size copies (a
+    // copy of a run-time length is a call per primitive).
+    const CHUNK: usize = 4096;
+    fn gather<const S: usize>(
+        prims: &mut [u8],
+        ids: &mut [u32],
+        refs: &[PrimRef],
+        data: &[u8],
+    ) -> Result<()> {
+        let cast = |e: bytemuck::PodCastError| internal(&format!("primitive records: {e}"));
+        let prims: &mut [[u8; S]] = bytemuck::try_cast_slice_mut(prims).map_err(cast)?;
+        let data: &[[u8; S]] =
+            bytemuck::try_cast_slice(&data[..data.len() / S * S]).map_err(cast)?;
         prims
-            .par_chunks_mut(S)
-            .zip(refs.par_iter())
-            .with_min_len(1024)
-            .for_each(|(out, r)| {
-                let at = r.id as usize * S;
-                if let (Ok(out), Some(Ok(src))) = (
-                    <&mut [u8; S]>::try_from(out),
-                    data.get(at..at + S).map(<&[u8; S]>::try_from),
-                ) {
-                    *out = *src;
+            .par_chunks_mut(CHUNK)
+            .zip(ids.par_chunks_mut(CHUNK))
+            .zip(refs.par_chunks(CHUNK))
+            .for_each(|((prims, ids), refs)| {
+                for ((p, i), r) in prims.iter_mut().zip(ids.iter_mut()).zip(refs) {
+                    *i = r.id;
+                    if let Some(src) = data.get(r.id as usize) {
+                        *p = *src;
+                    }
                 }
             });
+        Ok(())
     }
     match size {
-        0 => {}
-        TRI_BYTES => gather::<TRI_BYTES>(prims, refs, data),
-        24 => gather::<24>(prims, refs, data),
-        _ => prims
-            .par_chunks_mut(size)
-            .zip(refs.par_iter())
-            .with_min_len(1024)
-            .for_each(|(out, r)| {
-                let at = r.id as usize * size;
-                out.copy_from_slice(&data[at..at + size]);
-            }),
+        TRI_BYTES => gather::<TRI_BYTES>(prims, ids, refs, data)?,
+        24 => gather::<24>(prims, ids, refs, data)?,
+        _ => {
+            ids.par_iter_mut()
+                .zip(refs.par_iter())
+                .with_min_len(CHUNK)
+                .for_each(|(o, r)| *o = r.id);
+            if size > 0 {
+                prims
+                    .par_chunks_mut(size)
+                    .zip(refs.par_iter())
+                    .with_min_len(1024)
+                    .for_each(|(out, r)| {
+                        let at = r.id as usize * size;
+                        out.copy_from_slice(&data[at..at + size]);
+                    });
+            }
+        }
     }
     Ok(())
 }
