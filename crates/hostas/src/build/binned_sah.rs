@@ -263,6 +263,28 @@ impl Binner {
         };
         // bin(lo) = 0 < bin <= bin(hi).
         let (mut l, mut h) = (key(lo), key(hi));
+        // The plane's own position is within an ulp or two of the answer: narrow the
+        // interval around it first (the answer, the least float of bin `bin` or more, is the
+        // same whatever the interval it is searched in).
+        let mut guess = l0 + bin as f32 / s;
+        if !(guess >= lo) {
+            guess = lo;
+        }
+        if !(guess <= hi) {
+            guess = hi;
+        }
+        let g = key(guess);
+        if bin_of(guess) >= bin as i32 {
+            h = g;
+            if g - 1 > l && bin_of(float(g - 1)) < bin as i32 {
+                l = g - 1;
+            }
+        } else {
+            l = g;
+            if g + 1 < h && bin_of(float(g + 1)) >= bin as i32 {
+                h = g + 1;
+            }
+        }
         while h - l > 1 {
             let m = l + (h - l) / 2;
             if bin_of(float(m)) >= bin as i32 {
@@ -390,20 +412,20 @@ impl<const N: usize> Bins<N> {
     }
 }
 
-/// Binning of a range (on all threads when large).
-fn bin_range<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Bins<N> {
+/// Binning of a range into empty `bins` (on all threads when large; small ones are filled
+/// in place, not moved: a move is a copy of the whole array).
+fn bin_range<const N: usize>(bins: &mut Bins<N>, refs: &[PrimRef], binner: &Binner) {
     if refs.len() > PARALLEL_THRESHOLD * 4 {
-        refs.par_chunks(PARALLEL_THRESHOLD)
+        *bins = refs
+            .par_chunks(PARALLEL_THRESHOLD)
             .map(|c| {
                 let mut b = Bins::<N>::new();
                 b.fill(binner, c);
                 b
             })
-            .reduce(Bins::new, Bins::merge)
+            .reduce(Bins::new, Bins::merge);
     } else {
-        let mut b = Bins::<N>::new();
-        b.fill(binner, refs);
-        b
+        bins.fill(binner, refs);
     }
 }
 
@@ -526,7 +548,8 @@ fn binned_split_n<const N: usize>(
     info: &RangeInfo,
     binner: &Binner,
 ) -> Option<Split> {
-    let bins = bin_range::<N>(refs, binner);
+    let mut bins = Bins::<N>::new();
+    bin_range(&mut bins, refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
     // Left of the plane: `!(c >= t)` on the axis. The other lanes compare with NaN, which is
     // never true, so the plane's side is whether the mask is empty.
