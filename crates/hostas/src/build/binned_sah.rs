@@ -263,6 +263,28 @@ impl Binner {
         };
         // bin(lo) = 0 < bin <= bin(hi).
         let (mut l, mut h) = (key(lo), key(hi));
+        // The plane's own position is within an ulp or two of the answer: narrow the
+        // interval around it first (the answer, the least float of bin `bin` or more, is the
+        // same whatever the interval it is searched in).
+        let mut guess = l0 + bin as f32 / s;
+        if !(guess >= lo) {
+            guess = lo;
+        }
+        if !(guess <= hi) {
+            guess = hi;
+        }
+        let g = key(guess);
+        if bin_of(guess) >= bin as i32 {
+            h = g;
+            if g - 1 > l && bin_of(float(g - 1)) < bin as i32 {
+                l = g - 1;
+            }
+        } else {
+            l = g;
+            if g + 1 < h && bin_of(float(g + 1)) >= bin as i32 {
+                h = g + 1;
+            }
+        }
         while h - l > 1 {
             let m = l + (h - l) / 2;
             if bin_of(float(m)) >= bin as i32 {
@@ -390,20 +412,20 @@ impl<const N: usize> Bins<N> {
     }
 }
 
-/// Binning of a range (on all threads when large).
-fn bin_range<const N: usize>(refs: &[PrimRef], binner: &Binner) -> Bins<N> {
+/// Binning of a range into empty `bins` (on all threads when large; small ones are filled
+/// in place, not moved: a move is a copy of the whole array).
+fn bin_range<const N: usize>(bins: &mut Bins<N>, refs: &[PrimRef], binner: &Binner) {
     if refs.len() > PARALLEL_THRESHOLD * 4 {
-        refs.par_chunks(PARALLEL_THRESHOLD)
+        *bins = refs
+            .par_chunks(PARALLEL_THRESHOLD)
             .map(|c| {
                 let mut b = Bins::<N>::new();
                 b.fill(binner, c);
                 b
             })
-            .reduce(Bins::new, Bins::merge)
+            .reduce(Bins::new, Bins::merge);
     } else {
-        let mut b = Bins::<N>::new();
-        b.fill(binner, refs);
-        b
+        bins.fill(binner, refs);
     }
 }
 
@@ -526,7 +548,8 @@ fn binned_split_n<const N: usize>(
     info: &RangeInfo,
     binner: &Binner,
 ) -> Option<Split> {
-    let bins = bin_range::<N>(refs, binner);
+    let mut bins = Bins::<N>::new();
+    bin_range(&mut bins, refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
     // Left of the plane: `!(c >= t)` on the axis. The other lanes compare with NaN, which is
     // never true, so the plane's side is whether the mask is empty.
@@ -708,9 +731,13 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     let (left, right) = refs.split_at(best_mid);
     let (left, right) = (Acc::of(left), Acc::of(right));
     // Each side's orders: the range's orders filtered, as positions after the permutation.
+    // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
-    let (mut lo, mut ro) = ([[0u8; SMALL]; 3], [[0u8; SMALL]; 3]);
+    let (mut lo, mut ro) = ([identity; 3], [identity; 3]);
     for k in 0..3 {
+        if k == best_axis {
+            continue;
+        }
         let (mut li, mut ri) = (0, 0);
         for &o in &orders.0[k][..n] {
             let p = pos[o as usize & (SMALL - 1)];
@@ -878,6 +905,10 @@ fn build_child(
     let mut areas = [-1.0f32; WIDTH];
     areas[0] = area(&parts[0]);
     areas[1] = area(&parts[1]);
+    // Slot order as a list: part 0 starts the range, and a split part's right side follows
+    // it (no sort of the parts afterwards).
+    let mut next = [0u8; WIDTH];
+    next[0] = 1;
     let mut count = 2;
     while count < WIDTH {
         // Split the part with the largest area that has at least two primitives.
@@ -913,16 +944,25 @@ fn build_child(
         };
         areas[i] = area(&parts[i]);
         areas[count] = area(&parts[count]);
+        next[count] = next[i];
+        next[i] = count as u8;
         count += 1;
     }
-    let parts = &mut parts[..count];
-    parts.sort_by_key(|p| p.begin);
+    let mut cur = 0;
+    let in_order: [usize; WIDTH] = std::array::from_fn(|_| {
+        let j = cur;
+        cur = next[j] as usize & (WIDTH - 1);
+        j
+    });
     // Hand each part its own disjoint slice, then build them (in parallel when large).
     type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
     let mut slices: [Slot; WIDTH] = Default::default();
     let (mut rest, mut aux_rest) = (refs, aux);
     let mut at = 0;
-    for (slot, p) in slices.iter_mut().zip(parts.iter()) {
+    for (slot, p) in slices
+        .iter_mut()
+        .zip(in_order[..count].iter().map(|&j| &parts[j]))
+    {
         let (_, tail) = rest.split_at_mut(p.begin - at);
         let (mine, tail) = tail.split_at_mut(p.end - p.begin);
         let (_, atail) = aux_rest.split_at_mut(p.begin - at);
