@@ -65,13 +65,10 @@ impl<'s> Tracer<'s> {
         let mut stack = STACKS.with(|p| p.borrow_mut().pop()).unwrap_or_default();
         stack.resize(TRACER_STACK, Entry::default());
         let tlas = scene.tlas_view();
-        let single = tlas
-            .and_then(|t| match t.instances {
-                [only] => Some(only.hints & INSTANCE_IDENTITY != 0),
-                _ => None,
-            })
-            .filter(|&identity| identity)
-            .map(|_| 0);
+        let single = tlas.and_then(|t| match t.instances {
+            [only] if only.hints & INSTANCE_IDENTITY != 0 => Some(0),
+            _ => None,
+        });
         Tracer {
             scene,
             tlas,
@@ -159,9 +156,8 @@ impl<'s> Tracer<'s> {
                 } else {
                     let first = cur.child & !LEAF_BIT;
                     for slot in first..first + cur.count {
-                        let world = &mut world;
                         let found = enter(
-                            scene, cached, &tlas, world, slot, stack, sp, &mut best, first_hit,
+                            scene, cached, &tlas, &mut world, slot, stack, sp, &mut best, first_hit,
                         );
                         if found && first_hit {
                             break 'top;
