@@ -433,18 +433,21 @@ impl Ctx<'_> {
         // The parts, in position order, by their ends (each starts where the previous ends).
         let mut ends = [0usize; WIDTH];
         ends[0] = n;
+        // When each part was made (a split's left half keeps its part's number).
+        let mut made = [0usize; WIDTH];
         let mut live = 1;
         while live < WIDTH {
             // Split the part with the most primitives (areas are not known top-down), the
-            // first among equals; parts of one primitive are never split.
+            // first made among equals; parts of one primitive are never split.
             let (mut i, mut best, mut b, mut s) = (0, 0, 0, 0);
             for (j, &e) in ends[..live].iter().enumerate() {
-                if e - s > best {
-                    (i, best, b) = (j, e - s, s);
+                let key = (e - s) * WIDTH + (WIDTH - 1 - made[j]);
+                if key > best {
+                    (i, best, b) = (j, key, s);
                 }
                 s = e;
             }
-            if best < 2 {
+            if best < 2 * WIDTH {
                 break;
             }
             let e = ends[i];
@@ -456,8 +459,10 @@ impl Ctx<'_> {
             // (A loop: `copy_within` is a call to memmove.)
             for j in (i..live).rev() {
                 ends[j + 1] = ends[j];
+                made[j + 1] = made[j];
             }
             ends[i] = b + mid.clamp(1, e - b - 1);
+            made[i + 1] = live;
             live += 1;
         }
         let me = out.reserve();
