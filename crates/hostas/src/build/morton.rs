@@ -12,7 +12,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{LEAF_BIT, Node, WIDTH};
 use crate::math::Aabb;
 use rayon::prelude::*;
-use wide::f32x4;
+use wide::{f32x4, u8x32};
 
 /// Spreads the low 10 bits of `v` to every third bit.
 const fn spread(v: u32) -> u32 {
@@ -43,7 +43,7 @@ const TOP_SHIFT: u32 = 2 * DIGIT;
 /// The linear passes work in chunks of this many references.
 const CHUNK: usize = PARALLEL_THRESHOLD * 16;
 
-/// Ranges up to this size find their split point by counting, not by a binary search.
+/// Ranges up to this size find their split point in `delta`, not by a binary search.
 const LINEAR_SPLIT: usize = 256;
 
 /// A box as two vectors (lane 3 unused).
@@ -226,6 +226,24 @@ fn sort(keys: &mut [u64], tmp: &mut [u64], mut h: Hist, msd: bool) -> Vec<u32> {
     top
 }
 
+/// Per sorted position, 1 + the highest bit in which its code and the next differ (0: equal,
+/// or the last position).
+fn deltas(sorted: &[u64], delta: &mut [u8]) {
+    delta
+        .par_chunks_mut(CHUNK)
+        .zip(sorted.par_chunks(CHUNK))
+        .enumerate()
+        .for_each(|(ci, (d, ks))| {
+            let f = |a: u64, b: u64| (64 - ((a ^ b) >> 32).leading_zeros()) as u8;
+            let (body, last) = d.split_at_mut(d.len() - 1);
+            for (d, w) in body.iter_mut().zip(ks.windows(2)) {
+                *d = f(w[0], w[1]);
+            }
+            let (a, next) = (ks[ks.len() - 1], sorted.get((ci + 1) * CHUNK));
+            last[0] = next.map_or(0, |&b| f(a, b));
+        });
+}
+
 pub fn build(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
@@ -283,10 +301,15 @@ pub fn build(
             a
         });
     let top = sort(keys, tmp, h, msd);
+    // `keys` is free now: the differing bits of neighbouring codes, with 32 zeros after.
+    let delta = &mut bytemuck::cast_slice_mut::<u64, u8>(keys)[..(n + 32).min(8 * n)];
+    delta[n..].fill(0);
+    deltas(tmp, &mut delta[..n]);
     let ctx = Ctx {
         keys: tmp,
         aux,
         top: &top,
+        delta,
         leaf_max: max_leaf.max(WIDTH - 1),
     };
     let mut out = NodeList::new(nodes);
@@ -302,6 +325,9 @@ struct Ctx<'a> {
     aux: &'a [PrimRef],
     /// Start of each top digit in the sorted order, then `n`.
     top: &'a [u32],
+    /// Per sorted position, 1 + the highest bit in which its code and the next differ (0:
+    /// equal, or the last), then zeros.
+    delta: &'a [u8],
     /// Ranges up to this size become leaves.
     leaf_max: usize,
 }
@@ -309,27 +335,47 @@ struct Ctx<'a> {
 /// Position of the first key in `keys` whose code differs from the first code in the highest
 /// differing bit, or the middle when all codes are equal. `keys` start at position `base` of
 /// the sorted keys, and `top` says where each top digit starts there: splits on a top-digit bit
-/// are looked up, not searched for (the searches at the top levels miss the caches).
-fn split_point(keys: &[u64], base: usize, top: &[u32]) -> usize {
-    let (first, last) = ((keys[0] >> 32) as u32, (keys[keys.len() - 1] >> 32) as u32);
+/// are looked up, not searched for (the searches at the top levels miss the caches). `delta`
+/// holds per sorted position the highest differing bit (plus one) between its code and the
+/// next: in a short range the split is where it equals the range's highest differing bit.
+fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
+    let n = keys.len();
+    let (first, last) = ((keys[0] >> 32) as u32, (keys[n - 1] >> 32) as u32);
     if first == last {
-        return keys.len() / 2;
+        return n / 2;
     }
     let bit = 31 - (first ^ last).leading_zeros();
+    if n <= LINEAR_SPLIT {
+        // The one pair in the range that differs in `bit`, 32 pairs at a time.
+        let want = u8x32::splat(bit as u8 + 1);
+        let mut at = 0;
+        while at + 1 < n {
+            let Some(d) = delta.get(base + at..base + at + 32) else {
+                break;
+            };
+            let d: [u8; 32] = d.try_into().unwrap_or([0; 32]);
+            let mut hits = u8x32::from(d).simd_eq(want).to_bitmask();
+            // Pairs past the range's last one (`n - 2`) do not count.
+            let pairs = n - 1 - at;
+            if pairs < 32 {
+                hits &= (1u32 << pairs) - 1;
+            }
+            if hits != 0 {
+                return at + hits.trailing_zeros() as usize + 1;
+            }
+            at += 32;
+        }
+    }
     // The right half starts at the first code of at least `first`'s prefix with the bit set
     // (its lower bits zero).
     let right = (first & !((1u32 << bit) - 1)) | 1 << bit;
     if bit >= TOP_SHIFT {
         // Codes before `base` are at most `first`: the split is where that top digit starts.
         if let Some(&at) = top.get((right >> TOP_SHIFT) as usize) {
-            return (at as usize).saturating_sub(base).min(keys.len());
+            return (at as usize).saturating_sub(base).min(n);
         }
     }
     let t = (right as u64) << 32;
-    // Small ranges count the keys below it (no chain of dependent loads, and it vectorizes).
-    if keys.len() <= LINEAR_SPLIT {
-        return keys.iter().filter(|&&k| k < t).count();
-    }
     keys.partition_point(|&k| k < t)
 }
 
@@ -387,31 +433,36 @@ impl Ctx<'_> {
         // The parts, in position order, by their ends (each starts where the previous ends).
         let mut ends = [0usize; WIDTH];
         ends[0] = n;
+        // When each part was made (a split's left half keeps its part's number).
+        let mut made = [0usize; WIDTH];
         let mut live = 1;
         while live < WIDTH {
             // Split the part with the most primitives (areas are not known top-down), the
-            // first among equals; parts of one primitive are never split.
+            // first made among equals; parts of one primitive are never split.
             let (mut i, mut best, mut b, mut s) = (0, 0, 0, 0);
             for (j, &e) in ends[..live].iter().enumerate() {
-                if e - s > best {
-                    (i, best, b) = (j, e - s, s);
+                let key = (e - s) * WIDTH + (WIDTH - 1 - made[j]);
+                if key > best {
+                    (i, best, b) = (j, key, s);
                 }
                 s = e;
             }
-            if best < 2 {
+            if best < 2 * WIDTH {
                 break;
             }
             let e = ends[i];
             let mid = if depth < MEDIAN_DEPTH {
-                split_point(&keys[b..e], base + b, self.top)
+                split_point(&keys[b..e], base + b, self.top, self.delta)
             } else {
                 (e - b) / 2
             };
             // (A loop: `copy_within` is a call to memmove.)
             for j in (i..live).rev() {
                 ends[j + 1] = ends[j];
+                made[j + 1] = made[j];
             }
             ends[i] = b + mid.clamp(1, e - b - 1);
+            made[i + 1] = live;
             live += 1;
         }
         let me = out.reserve();
@@ -465,6 +516,41 @@ impl Ctx<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Split points found in `delta` are those of a binary search.
+    #[test]
+    fn delta_splits() {
+        let mut seed = 0x1234_5678u32;
+        let mut rnd = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 17;
+            seed ^= seed << 5;
+            seed
+        };
+        // (Past one chunk of the parallel pass.)
+        let n = CHUNK + 5000;
+        // Few distinct codes in places, so that equal neighbours occur.
+        let mut keys: Vec<u64> = (0..n)
+            .map(|i| ((rnd() & 0x3fff_ffff & !(rnd() & 0xff)) as u64) << 32 | i as u64)
+            .collect();
+        keys.sort_unstable();
+        let mut delta = vec![0u8; n + 32];
+        deltas(&keys, &mut delta[..n]);
+        for _ in 0..20_000 {
+            let b = rnd() as usize % (n - 2);
+            let e = (b + 2 + rnd() as usize % LINEAR_SPLIT).min(n);
+            let r = &keys[b..e];
+            let (first, last) = ((r[0] >> 32) as u32, (r[r.len() - 1] >> 32) as u32);
+            let want = if first == last {
+                r.len() / 2
+            } else {
+                let bit = 31 - (first ^ last).leading_zeros();
+                let right = (first & !((1u32 << bit) - 1)) | 1 << bit;
+                r.partition_point(|&k| k < (right as u64) << 32)
+            };
+            assert_eq!(split_point(r, b, &[], &delta), want, "range {b}..{e}");
+        }
+    }
 
     /// Both sorts (from the top digit, from the lowest) give the keys in order.
     #[test]
