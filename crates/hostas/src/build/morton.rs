@@ -396,12 +396,13 @@ fn leaf(keys: &[u64], aux: &[PrimRef], dst: &mut [PrimRef]) -> Bounds {
 #[inline(always)]
 fn set_child(node: &mut Node, k: usize, b: &Bounds, c: Child) {
     let (lo, hi) = (b.lo.to_array(), b.hi.to_array());
-    node.lo_x[k] = lo[0];
-    node.lo_y[k] = lo[1];
-    node.lo_z[k] = lo[2];
-    node.hi_x[k] = hi[0];
-    node.hi_y[k] = hi[1];
-    node.hi_z[k] = hi[2];
+    node.set_bounds(
+        k,
+        &Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        },
+    );
     match c {
         Child::Leaf { first, count } => {
             node.child[k] = LEAF_BIT | first;

@@ -942,14 +942,9 @@ impl<S: Source> Walk<'_, '_, S> {
         }
         let node = self.nodes.get_mut(li)?;
         if child.contains(&EMPTY_CHILD) {
-            for (k, (lo, hi)) in boxes.iter().enumerate() {
+            for (k, b) in boxes.iter().enumerate() {
                 if child[k] != EMPTY_CHILD {
-                    node.lo_x[k] = lo[0];
-                    node.lo_y[k] = lo[1];
-                    node.lo_z[k] = lo[2];
-                    node.hi_x[k] = hi[0];
-                    node.hi_y[k] = hi[1];
-                    node.hi_z[k] = hi[2];
+                    node.set_bounds(k, &to_aabb(*b));
                 }
             }
         } else {
