@@ -47,6 +47,60 @@ macro_rules! lanewise_min_max {
 lanewise_min_max!(fmin4, fmax4, wide::f32x4);
 lanewise_min_max!(fmin8, fmax8, wide::f32x8);
 
+/// A box as two four-lane vectors (lane 3 unspecified), grown with [`fmin4`]/[`fmax4`] in the
+/// operand order of [`Aabb`]'s operations, so it holds the same bits as the scalar box would.
+#[derive(Clone, Copy, Debug)]
+pub struct Box4 {
+    pub lo: wide::f32x4,
+    pub hi: wide::f32x4,
+}
+
+impl Box4 {
+    pub const EMPTY: Box4 = Box4 {
+        lo: wide::f32x4::new([f32::INFINITY; 4]),
+        hi: wide::f32x4::new([f32::NEG_INFINITY; 4]),
+    };
+
+    /// A triangle's box: `Aabb::point(a)`, then `grow(b)`, `grow(c)`.
+    #[inline(always)]
+    pub fn triangle(a: wide::f32x4, b: wide::f32x4, c: wide::f32x4) -> Box4 {
+        Box4 {
+            lo: fmin4(fmin4(a, b), c),
+            hi: fmax4(fmax4(a, b), c),
+        }
+    }
+
+    /// `Aabb::union`.
+    #[inline(always)]
+    pub fn union(self, o: Box4) -> Box4 {
+        Box4 {
+            lo: fmin4(self.lo, o.lo),
+            hi: fmax4(self.hi, o.hi),
+        }
+    }
+
+    #[inline(always)]
+    pub fn grow(&mut self, o: &Box4) {
+        *self = self.union(*o);
+    }
+
+    /// Grows to hold `p`, ignoring NaN lanes of `p` (the point goes first, so a NaN lane
+    /// yields the current bound).
+    #[inline(always)]
+    pub fn grow_point(&mut self, p: wide::f32x4) {
+        self.lo = fmin4(p, self.lo);
+        self.hi = fmax4(p, self.hi);
+    }
+
+    pub fn aabb(&self) -> Aabb {
+        let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
+        Aabb {
+            lo: [lo[0], lo[1], lo[2]],
+            hi: [hi[0], hi[1], hi[2]],
+        }
+    }
+}
+
 #[inline(always)]
 pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

@@ -7,7 +7,7 @@
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{Node, WIDTH};
-use crate::math::Aabb;
+use crate::math::{Aabb, Box4, fmin8};
 use rayon::prelude::*;
 use wide::{f32x4, f32x8};
 
@@ -40,7 +40,7 @@ impl Box8 {
     /// wins over the current bound).
     #[inline(always)]
     fn grow(&mut self, o: &Box8) {
-        self.0 = self.0.fast_min(o.0);
+        self.0 = fmin8(self.0, o.0);
     }
     #[inline(always)]
     fn halves(&self) -> (f32x4, f32x4) {
@@ -84,41 +84,6 @@ fn half_areas3(b: &[Box8; 3]) -> f32x4 {
     x * y + y * z + z * x
 }
 
-/// A box of points (centroids) as two 4-lane vectors (lane 3 is ignored).
-#[derive(Clone, Copy, Debug)]
-struct B4 {
-    lo: f32x4,
-    hi: f32x4,
-}
-
-impl B4 {
-    const EMPTY: B4 = B4 {
-        lo: f32x4::new([f32::INFINITY; 4]),
-        hi: f32x4::new([f32::NEG_INFINITY; 4]),
-    };
-
-    #[inline(always)]
-    fn grow(&mut self, o: &B4) {
-        self.lo = self.lo.fast_min(o.lo);
-        self.hi = self.hi.fast_max(o.hi);
-    }
-    /// Grows to hold `p`, ignoring NaN lanes of `p` (`minps` returns its second operand when
-    /// either is NaN): the bounds then hold every other centroid, which the partition by a
-    /// threshold relies on (see [`Binner::threshold`]).
-    #[inline(always)]
-    fn grow_point(&mut self, p: f32x4) {
-        self.lo = p.fast_min(self.lo);
-        self.hi = p.fast_max(self.hi);
-    }
-    fn aabb(&self) -> Aabb {
-        let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
-        Aabb {
-            lo: [lo[0], lo[1], lo[2]],
-            hi: [hi[0], hi[1], hi[2]],
-        }
-    }
-}
-
 /// The doubled centroid of a reference (lane 3 is meaningless).
 #[inline(always)]
 fn center2(r: &PrimRef) -> f32x4 {
@@ -137,13 +102,13 @@ pub(crate) struct RangeInfo {
 #[derive(Clone, Copy)]
 struct Acc {
     bounds: Box8,
-    centroids: B4,
+    centroids: Box4,
 }
 
 impl Acc {
     const EMPTY: Acc = Acc {
         bounds: Box8::EMPTY,
-        centroids: B4::EMPTY,
+        centroids: Box4::EMPTY,
     };
     #[inline(always)]
     fn add(&mut self, r: &PrimRef) {
@@ -246,7 +211,7 @@ impl Binner {
     /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
     /// The mapping is monotone, so over the range `bin(c) < bin` exactly when `!(c >= t)`: a
     /// partition by one comparison. (A NaN centroid, in bin 0, goes left either way; the
-    /// range's centroid bounds hold every other centroid, see [`B4::grow_point`].) Found by
+    /// range's centroid bounds hold every other centroid, see [`Box4::grow_point`].) Found by
     /// bisection over the floats' order.
     fn threshold(&self, axis: usize, bin: u32, lo: f32, hi: f32) -> f32 {
         let (l0, s) = (self.lo.to_array()[axis & 3], self.scales[axis & 3]);
@@ -437,7 +402,7 @@ fn parallel_partition(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     left_of: impl Fn(f32x4) -> bool + Sync,
-) -> (usize, B4, B4) {
+) -> (usize, Box4, Box4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
     let lefts: Vec<usize> = refs
         .par_chunks(CHUNK)
@@ -455,11 +420,11 @@ fn parallel_partition(
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<(B4, B4)> = refs
+    let infos: Vec<(Box4, Box4)> = refs
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
-            let (mut la, mut ra) = (B4::EMPTY, B4::EMPTY);
+            let (mut la, mut ra) = (Box4::EMPTY, Box4::EMPTY);
             let (mut li, mut ri) = (0, 0);
             for r in c {
                 let c = center2(r);
@@ -479,7 +444,7 @@ fn parallel_partition(
     refs.par_chunks_mut(CHUNK)
         .zip(aux.par_chunks(CHUNK))
         .for_each(|(d, s)| d.copy_from_slice(s));
-    let (mut l, mut r) = (B4::EMPTY, B4::EMPTY);
+    let (mut l, mut r) = (Box4::EMPTY, Box4::EMPTY);
     for (a, b) in &infos {
         l.grow(a);
         r.grow(b);
@@ -494,10 +459,10 @@ fn stable_partition(
     aux: &mut [PrimRef],
     left: usize,
     left_of: impl Fn(f32x4) -> bool,
-) -> Option<(usize, B4, B4)> {
+) -> Option<(usize, Box4, Box4)> {
     let aux = &mut aux[..refs.len()];
     // Centroid bounds of the right side, then the left, indexed by the side (see `partition`).
-    let mut storage = [B4::EMPTY; 2];
+    let mut storage = [Box4::EMPTY; 2];
     let acc = std::hint::black_box(&mut storage);
     let (mut li, mut ri) = (0, left);
     for r in refs.iter() {
@@ -523,10 +488,10 @@ fn stable_partition(
 /// unconditional swap, bounds accumulated in an array indexed by the side): which side a
 /// primitive goes to is often a coin toss, and mispredicted branches cost more than the extra
 /// stores.
-fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, B4, B4) {
+fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, Box4, Box4) {
     // Centroid bounds of the right side, then the left: indexed by the side, not branched on
     // (kept in memory: as two registers, the compiler would branch again).
-    let mut storage = [B4::EMPTY; 2];
+    let mut storage = [Box4::EMPTY; 2];
     let acc = std::hint::black_box(&mut storage);
     let mut i = 0;
     for j in 0..refs.len() {

@@ -9,9 +9,10 @@ pub mod binned_sah;
 pub mod morton;
 pub mod tree;
 
-use crate::math::Aabb;
+use crate::math::{Aabb, Box4};
 use ash::vk;
 use bytemuck::{Pod, Zeroable};
+use wide::f32x4;
 
 /// A primitive as the builders see it: its bounds and its index in the decoded input.
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
@@ -30,6 +31,15 @@ impl PrimRef {
             id,
             hi: b.hi,
             pad: 0,
+        }
+    }
+    /// The bounds as vectors (lane 3 holds the id and pad bits).
+    #[inline(always)]
+    pub fn box4(&self) -> Box4 {
+        let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*self);
+        Box4 {
+            lo: f32x4::from(lo),
+            hi: f32x4::from(hi),
         }
     }
     #[inline(always)]

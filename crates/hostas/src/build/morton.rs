@@ -10,7 +10,7 @@
 use super::tree::{Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{LEAF_BIT, Node, WIDTH};
-use crate::math::Aabb;
+use crate::math::Box4;
 use rayon::prelude::*;
 use wide::{f32x4, u8x32};
 
@@ -46,43 +46,6 @@ const CHUNK: usize = PARALLEL_THRESHOLD * 16;
 /// Ranges up to this size find their split point in `delta`, not by a binary search.
 const LINEAR_SPLIT: usize = 256;
 
-/// A box as two vectors (lane 3 unused).
-#[derive(Clone, Copy)]
-struct Bounds {
-    lo: f32x4,
-    hi: f32x4,
-}
-
-impl Bounds {
-    const EMPTY: Bounds = Bounds {
-        lo: f32x4::splat(f32::INFINITY),
-        hi: f32x4::splat(f32::NEG_INFINITY),
-    };
-    /// `minps`/`maxps` with the operand order of `Aabb::union`.
-    #[inline(always)]
-    fn union(self, o: Bounds) -> Bounds {
-        Bounds {
-            lo: self.lo.fast_min(o.lo),
-            hi: self.hi.fast_max(o.hi),
-        }
-    }
-    #[inline(always)]
-    fn of(r: &PrimRef) -> Bounds {
-        let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
-        Bounds {
-            lo: f32x4::from(lo),
-            hi: f32x4::from(hi),
-        }
-    }
-    fn aabb(&self) -> Aabb {
-        let (lo, hi) = (self.lo.to_array(), self.hi.to_array());
-        Aabb {
-            lo: [lo[0], lo[1], lo[2]],
-            hi: [hi[0], hi[1], hi[2]],
-        }
-    }
-}
-
 /// Keeps lanes 0..3 (lane 3 of a reference holds the id or pad bits).
 const XYZ: f32x4 = f32x4::new([
     f32::from_bits(!0),
@@ -99,20 +62,20 @@ fn center2(r: &PrimRef) -> f32x4 {
 }
 
 /// Bounds of the doubled centroids, over fixed chunks combined in order.
-fn centroid_bounds(refs: &[PrimRef]) -> Bounds {
+fn centroid_bounds(refs: &[PrimRef]) -> Box4 {
     let part = |rs: &[PrimRef]| {
-        let mut b = Bounds::EMPTY;
+        let mut b = Box4::EMPTY;
         for r in rs {
             let c = center2(r);
-            b = b.union(Bounds { lo: c, hi: c });
+            b = b.union(Box4 { lo: c, hi: c });
         }
         b
     };
     if refs.len() <= CHUNK {
         return part(refs);
     }
-    let parts: Vec<Bounds> = refs.par_chunks(CHUNK).map(part).collect();
-    parts.into_iter().fold(Bounds::EMPTY, Bounds::union)
+    let parts: Vec<Box4> = refs.par_chunks(CHUNK).map(part).collect();
+    parts.into_iter().fold(Box4::EMPTY, Box4::union)
 }
 
 /// Digit histograms (bucket counts, then bucket starts).
@@ -382,27 +345,20 @@ fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
 /// A leaf over sorted positions `keys`: gathers the references into `dst` and returns their
 /// bounds.
 #[inline(always)]
-fn leaf(keys: &[u64], aux: &[PrimRef], dst: &mut [PrimRef]) -> Bounds {
-    let mut b = Bounds::EMPTY;
+fn leaf(keys: &[u64], aux: &[PrimRef], dst: &mut [PrimRef]) -> Box4 {
+    let mut b = Box4::EMPTY;
     for (d, &k) in dst.iter_mut().zip(keys) {
         let r = aux[k as u32 as usize];
         *d = r;
-        b = b.union(Bounds::of(&r));
+        b = b.union(r.box4());
     }
     b
 }
 
 /// Writes child `k` of `node`.
 #[inline(always)]
-fn set_child(node: &mut Node, k: usize, b: &Bounds, c: Child) {
-    let (lo, hi) = (b.lo.to_array(), b.hi.to_array());
-    node.set_bounds(
-        k,
-        &Aabb {
-            lo: [lo[0], lo[1], lo[2]],
-            hi: [hi[0], hi[1], hi[2]],
-        },
-    );
+fn set_child(node: &mut Node, k: usize, b: &Box4, c: Child) {
+    node.set_bounds(k, &b.aabb());
     match c {
         Child::Leaf { first, count } => {
             node.child[k] = LEAF_BIT | first;
@@ -421,7 +377,7 @@ impl Ctx<'_> {
         dst: &mut [PrimRef],
         depth: u32,
         out: &mut NodeList,
-    ) -> (Bounds, Child) {
+    ) -> (Box4, Child) {
         let n = dst.len();
         let keys = &self.keys[base..base + n];
         if n <= self.leaf_max {
@@ -468,7 +424,7 @@ impl Ctx<'_> {
         }
         let me = out.reserve();
         let mut node = Node::EMPTY;
-        let mut bounds = Bounds::EMPTY;
+        let mut bounds = Box4::EMPTY;
         if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
             let mut pieces = Vec::with_capacity(live);
             let (mut rest, mut s) = (dst, 0);
@@ -477,7 +433,7 @@ impl Ctx<'_> {
                 pieces.push((s, mine));
                 (rest, s) = (tail, e);
             }
-            let built: Vec<(Bounds, Child, NodeList)> = pieces
+            let built: Vec<(Box4, Child, NodeList)> = pieces
                 .into_par_iter()
                 .map(|(s, d)| {
                     let mut sub = NodeList::with_capacity(node_hint(d.len()));

@@ -15,7 +15,7 @@ use crate::layout::view::{self, View};
 use crate::layout::{
     GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord, Kind, PrimKind,
 };
-use crate::math::{Aabb, Affine};
+use crate::math::{Aabb, Affine, Box4};
 use ash::vk;
 use rayon::prelude::*;
 use wide::f32x4;
@@ -1034,9 +1034,9 @@ fn decode_tris(
         out[..16].copy_from_slice(&bytes(a));
         out[12..28].copy_from_slice(&bytes(b));
         out[24..].copy_from_slice(&bytes(c)[..12]);
-        // The bounds as `Aabb::point` and `grow` make them (`minps`/`maxps`, same operands).
-        let mut lo = a.fast_min(b).fast_min(c).to_array();
-        let mut hi = a.fast_max(b).fast_max(c).to_array();
+        // The bounds as `Aabb::point` and `grow` make them.
+        let tri = Box4::triangle(a, b, c);
+        let (mut lo, mut hi) = (tri.lo.to_array(), tri.hi.to_array());
         let dead = a.as_array()[0].is_nan();
         inactive += dead as usize;
         lo[3] = f32::from_bits((first + j) as u32);

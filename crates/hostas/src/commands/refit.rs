@@ -24,7 +24,7 @@ use crate::layout::{
     EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
     MAX_LEAF_SIZE, NODE_SIZE, Node, PrimKind, WIDTH,
 };
-use crate::math::{Aabb, fmax4, fmin4};
+use crate::math::{Aabb, Box4, fmax4, fmin4};
 use rayon::prelude::*;
 use wide::f32x4;
 
@@ -149,44 +149,32 @@ trait StoredPrim: bytemuck::Pod + Send {
     fn leaf_box(prims: &[Self]) -> Lanes;
 }
 
-/// A box being grown: both corners in four lanes (the last unspecified), grown with the
-/// vector forms of `fmin`/`fmax`, which give the same bits as the general path's scalar ones.
-#[derive(Clone, Copy)]
-struct Grow {
-    lo: f32x4,
-    hi: f32x4,
+/// Grows `g` by the triangle `a, b, c` (its box as `Aabb::point(a)`, `grow(b)`, `grow(c)`,
+/// then `union`): the same operations in the same order as the general path's.
+#[inline(always)]
+fn grow_triangle(g: &mut Box4, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
+    let v = |p: [f32; 3]| f32x4::new([p[0], p[1], p[2], p[2]]);
+    g.grow(&Box4::triangle(v(a), v(b), v(c)));
 }
 
-impl Grow {
-    const EMPTY: Grow = Grow {
-        lo: f32x4::new([f32::INFINITY; 4]),
-        hi: f32x4::new([f32::NEG_INFINITY; 4]),
-    };
-
-    /// A triangle's box (`Aabb::point(a)`, `grow(b)`, `grow(c)`), then its union with the box
-    /// so far: the same operations in the same order as the general path's.
-    #[inline(always)]
-    fn triangle(&mut self, a: [f32; 3], b: [f32; 3], c: [f32; 3]) {
-        let v = |p: [f32; 3]| f32x4::new([p[0], p[1], p[2], p[2]]);
-        let (a, b, c) = (v(a), v(b), v(c));
-        self.lo = fmin4(self.lo, fmin4(fmin4(a, b), c));
-        self.hi = fmax4(self.hi, fmax4(fmax4(a, b), c));
-    }
-
-    #[inline(always)]
-    fn lanes(self) -> Lanes {
-        (self.lo.to_array(), self.hi.to_array())
-    }
+#[inline(always)]
+fn lanes(b: Box4) -> Lanes {
+    (b.lo.to_array(), b.hi.to_array())
 }
 
 impl StoredPrim for [f32; 9] {
     #[inline(always)]
     fn leaf_box(prims: &[[f32; 9]]) -> Lanes {
-        let mut g = Grow::EMPTY;
+        let mut g = Box4::EMPTY;
         for f in prims {
-            g.triangle([f[0], f[1], f[2]], [f[3], f[4], f[5]], [f[6], f[7], f[8]]);
+            grow_triangle(
+                &mut g,
+                [f[0], f[1], f[2]],
+                [f[3], f[4], f[5]],
+                [f[6], f[7], f[8]],
+            );
         }
-        g.lanes()
+        lanes(g)
     }
 }
 
@@ -403,7 +391,7 @@ impl<I: Indices, V: Vertices> Source for TriF32<I, V> {
         // (A copy, so that the compiler keeps the fields in registers.)
         let d = *self;
         let mut ok = true;
-        let mut bounds = Grow::EMPTY;
+        let mut bounds = Box4::EMPTY;
         for (o, &id) in out.iter_mut().zip(ids) {
             let v = d.vertex_indices(id);
             let (a, b, c) = (
@@ -413,9 +401,9 @@ impl<I: Indices, V: Vertices> Source for TriF32<I, V> {
             );
             ok &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
             *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-            bounds.triangle(a, b, c);
+            grow_triangle(&mut bounds, a, b, c);
         }
-        ok.then_some(bounds.lanes())
+        ok.then_some(lanes(bounds))
     }
 }
 
