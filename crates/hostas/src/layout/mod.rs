@@ -191,6 +191,14 @@ impl Node {
         count: [0; WIDTH],
         reserved: [0; 6],
     };
+    /// Rows of [`Node::rows`] holding `lo_x`, `lo_y`, `lo_z` (each `hi_` follows its `lo_`).
+    pub const LO_ROWS: [usize; 3] = [0, 2, 4];
+    /// The node as eight rows of eight lanes: the six bound planes, then `child` and
+    /// `count`/`reserved` as bits (traversal picks plane rows by index, once per ray).
+    #[inline(always)]
+    pub fn rows(&self) -> &[[f32; WIDTH]; 8] {
+        bytemuck::cast_ref(self)
+    }
     pub fn set_bounds(&mut self, k: usize, b: &Aabb) {
         self.lo_x[k] = b.lo[0];
         self.lo_y[k] = b.lo[1];
@@ -232,4 +240,26 @@ const _: () = assert!(std::mem::size_of::<InstanceRecord>() == 128);
 
 pub fn align_up(v: u64, a: u64) -> u64 {
     v.div_ceil(a) * a
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn node_rows_are_the_planes_in_order() {
+        let mut n = Node::EMPTY;
+        n.set_bounds(
+            3,
+            &Aabb {
+                lo: [1.0, 2.0, 3.0],
+                hi: [4.0, 5.0, 6.0],
+            },
+        );
+        let rows = n.rows();
+        for (axis, lo_row) in Node::LO_ROWS.into_iter().enumerate() {
+            assert_eq!(rows[lo_row][3], n.bounds(3).lo[axis]);
+            assert_eq!(rows[lo_row + 1][3], n.bounds(3).hi[axis]);
+        }
+    }
 }

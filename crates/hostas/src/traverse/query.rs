@@ -162,6 +162,7 @@ pub(super) const ROBUST_FAR: f32 =
 #[derive(Clone, Copy)]
 pub(super) struct BoxRay {
     origin: Vec3,
+    pub(super) direction: Vec3,
     inv: Vec3,
     /// `inv * ROBUST_FAR`: the far distances' widening folded into the inverse (as many
     /// roundings as widening the product, so the same bound; three multiplications fewer per
@@ -169,6 +170,10 @@ pub(super) struct BoxRay {
     inv_far: Vec3,
     /// Per axis: the ray goes towards smaller values, so a box's near plane is its max.
     neg: [bool; 3],
+    /// Per axis, the row of a node (seen as [`Node::rows`]) that holds the children's near
+    /// and far planes: chosen once per ray, not per node.
+    near_row: [usize; 3],
+    far_row: [usize; 3],
 }
 
 impl BoxRay {
@@ -177,16 +182,23 @@ impl BoxRay {
         // +-inf (never entered), and a ray lying exactly in a slab's plane gives 0 * inf = NaN,
         // which the min/max below drop (the ray is inside that slab, boundaries included).
         let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
+        let neg = inv.map(f32::is_sign_negative);
         BoxRay {
             origin,
+            direction: dir,
             inv,
             inv_far: inv.map(|i| i * ROBUST_FAR),
-            neg: [
-                inv[0].is_sign_negative(),
-                inv[1].is_sign_negative(),
-                inv[2].is_sign_negative(),
-            ],
+            neg,
+            near_row: [0, 1, 2].map(|k| Node::LO_ROWS[k] + usize::from(neg[k])),
+            far_row: [0, 1, 2].map(|k| Node::LO_ROWS[k] + usize::from(!neg[k])),
         }
+    }
+
+    /// The same ray prepared for the watertight triangle test, for a ray whose
+    /// [`permutation`](super::triangle::permutation) is `P` (reusing the inverse).
+    #[inline(always)]
+    pub(super) fn sheared<const P: usize>(&self) -> ShearedRay {
+        ShearedRay::for_axes::<P>(self.origin, self.direction, self.inv)
     }
 
     /// Entry distances of the children of `node` and the mask of those the segment
@@ -194,22 +206,11 @@ impl BoxRay {
     /// never hit. All eight slabs at once (`wide`: AVX, or two SSE halves).
     #[inline(always)]
     pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
-        let (nx, fx) = if self.neg[0] {
-            (&n.hi_x, &n.lo_x)
-        } else {
-            (&n.lo_x, &n.hi_x)
-        };
-        let (ny, fy) = if self.neg[1] {
-            (&n.hi_y, &n.lo_y)
-        } else {
-            (&n.lo_y, &n.hi_y)
-        };
-        let (nz, fz) = if self.neg[2] {
-            (&n.hi_z, &n.lo_z)
-        } else {
-            (&n.lo_z, &n.hi_z)
-        };
-        let v = |a: &[f32; WIDTH]| f32x8::from(*a);
+        let rows = n.rows();
+        // `& 7`: the rows are eight, so the index needs no bounds check.
+        let row = |r: usize| f32x8::from(rows[r & 7]);
+        let [nx, ny, nz] = self.near_row.map(row);
+        let [fx, fy, fz] = self.far_row.map(row);
         let s = f32x8::splat;
         let [ox, oy, oz] = self.origin.map(s);
         let [ix, iy, iz] = self.inv.map(s);
@@ -219,14 +220,14 @@ impl BoxRay {
         // the far end at f32::MAX also rejects a ray parallel to a slab it is outside of,
         // which enters at +inf.
         let near = fmax8(
-            (v(nx) - ox) * ix,
-            fmax8((v(ny) - oy) * iy, fmax8((v(nz) - oz) * iz, s(t_min))),
+            (nx - ox) * ix,
+            fmax8((ny - oy) * iy, fmax8((nz - oz) * iz, s(t_min))),
         );
         let far = fmin8(
-            (v(fx) - ox) * jx,
+            (fx - ox) * jx,
             fmin8(
-                (v(fy) - oy) * jy,
-                fmin8((v(fz) - oz) * jz, s(fmin(t_max, f32::MAX))),
+                (fy - oy) * jy,
+                fmin8((fz - oz) * jz, s(fmin(t_max, f32::MAX))),
             ),
         );
         (near.simd_le(far).to_bitmask(), near.to_array())

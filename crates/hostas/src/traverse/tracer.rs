@@ -9,7 +9,7 @@
 
 use super::query::{BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, resolve_opacity};
 use super::scene::{Hit, HitKind, Scene};
-use super::triangle::ShearedRay;
+use super::triangle::permutation;
 use super::{Ray, RayFlags};
 use crate::error::Result;
 use crate::layout::view::View;
@@ -28,9 +28,44 @@ pub struct Tracer<'s> {
     /// The bottom-level view used last (consecutive instances often share one).
     cached: Option<(u32, View<'s>)>,
     stack: Vec<Entry>,
-    /// The slot of the top level's only instance, when it is the identity: the ray then goes
-    /// straight to that instance's bottom level.
-    single: Option<u32>,
+    /// The top level's only instance, when it is the identity: rays go straight to its
+    /// bottom level, resolved once here.
+    direct: Option<Direct<'s>>,
+}
+
+/// A top level that holds one identity instance of a non-empty bottom level. Its only box
+/// is the instance's world box, which the bottom level's root test covers: walking the top
+/// level would only add its cost.
+struct Direct<'s> {
+    view: View<'s>,
+    inst: &'s InstanceRecord,
+    blas: u32,
+    /// The ray flag that skips the bottom level's kind of primitive.
+    skip: RayFlags,
+}
+
+impl<'s> Direct<'s> {
+    fn new(scene: &'s Scene, tlas: &View<'s>) -> Option<Direct<'s>> {
+        let [inst] = tlas.instances else {
+            return None;
+        };
+        if inst.hints & INSTANCE_IDENTITY == 0 {
+            return None;
+        }
+        let blas = scene.instance_blas_index(0)?;
+        let view = scene.blas_view(blas)?;
+        let skip = match view.prim_kind {
+            PrimKind::Triangles => RayFlags::SKIP_TRIANGLES,
+            PrimKind::Aabbs => RayFlags::SKIP_AABBS,
+            _ => return None,
+        };
+        (!view.nodes.is_empty()).then_some(Direct {
+            view,
+            inst,
+            blas,
+            skip,
+        })
+    }
 }
 
 impl Drop for Tracer<'_> {
@@ -65,16 +100,12 @@ impl<'s> Tracer<'s> {
         let mut stack = STACKS.with(|p| p.borrow_mut().pop()).unwrap_or_default();
         stack.resize(TRACER_STACK, Entry::default());
         let tlas = scene.tlas_view();
-        let single = tlas.and_then(|t| match t.instances {
-            [only] if only.hints & INSTANCE_IDENTITY != 0 => Some(0),
-            _ => None,
-        });
         Tracer {
             scene,
             tlas,
             cached: None,
             stack,
-            single,
+            direct: tlas.as_ref().and_then(|t| Direct::new(scene, t)),
         }
     }
 
@@ -101,12 +132,6 @@ impl<'s> Tracer<'s> {
 
     fn trace(&mut self, ray: &Ray, first_hit: bool) -> Result<Hit> {
         ray.validate()?;
-        let Some(tlas) = self.tlas else {
-            return Ok(Hit::MISS);
-        };
-        if tlas.nodes.is_empty() {
-            return Ok(Hit::MISS);
-        }
         let mut best = Best {
             t: ray.t_max,
             kind: HitKind::Miss,
@@ -116,79 +141,100 @@ impl<'s> Tracer<'s> {
             barycentrics: [0.0; 2],
             front_face: false,
         };
+        if let Some(d) = &self.direct {
+            if d.inst.mask & ray.cull_mask & 0xff != 0 && !ray.flags.contains(d.skip) {
+                let boxes = BoxRay::new(ray.origin, ray.direction);
+                let at = BlasAt {
+                    view: &d.view,
+                    inst: d.inst,
+                    slot: 0,
+                    blas: d.blas,
+                };
+                walk_blas(&mut self.stack, 0, &at, &boxes, ray, &mut best, first_hit);
+            }
+            return Ok(hit(&best, d.inst, Some(&d.view)));
+        }
+        let Some(tlas) = self.tlas else {
+            return Ok(Hit::MISS);
+        };
+        if tlas.nodes.is_empty() {
+            return Ok(Hit::MISS);
+        }
         let mut world = World {
             ray,
             boxes: BoxRay::new(ray.origin, ray.direction),
-            sheared: None,
             object: None,
         };
         // Disjoint borrows of the tracer's parts (the stack is borrowed for the whole trace).
         let stack = &mut self.stack[..];
         let scene = self.scene;
         let cached = &mut self.cached;
-        if let Some(slot) = self.single {
-            // The top level's only box is this instance's, and the bottom level's root test
-            // covers it: the top-level traversal would only add its cost.
-            enter(
-                scene, cached, &tlas, &mut world, slot, stack, 0, &mut best, first_hit,
-            );
-        } else {
-            let mut sp = 0;
-            let mut cur = Entry {
-                child: 0,
-                count: 0,
-                t: f32::NEG_INFINITY,
-            };
-            'top: loop {
-                if cur.child & LEAF_BIT == 0 {
-                    if let Some(next) = descend(
-                        stack,
-                        &mut sp,
-                        tlas.nodes,
-                        cur.child,
-                        &world.boxes,
-                        ray.t_min,
-                        best.t,
-                    ) {
-                        cur = next;
-                        continue;
-                    }
-                } else {
-                    let first = cur.child & !LEAF_BIT;
-                    for slot in first..first + cur.count {
-                        let found = enter(
-                            scene, cached, &tlas, &mut world, slot, stack, sp, &mut best, first_hit,
-                        );
-                        if found && first_hit {
-                            break 'top;
-                        }
+        let mut sp = 0;
+        let mut cur = Entry {
+            child: 0,
+            count: 0,
+            t: f32::NEG_INFINITY,
+        };
+        'top: loop {
+            if cur.child & LEAF_BIT == 0 {
+                if let Some(next) = descend(
+                    stack,
+                    &mut sp,
+                    tlas.nodes,
+                    cur.child,
+                    &world.boxes,
+                    ray.t_min,
+                    best.t,
+                ) {
+                    cur = next;
+                    continue;
+                }
+            } else {
+                let first = cur.child & !LEAF_BIT;
+                for slot in first..first + cur.count {
+                    let found = enter(
+                        scene, cached, &tlas, &mut world, slot, stack, sp, &mut best, first_hit,
+                    );
+                    if found && first_hit {
+                        break 'top;
                     }
                 }
-                match pop(stack, &mut sp, 0, best.t) {
-                    Some(e) => cur = e,
-                    None => break,
-                }
+            }
+            match pop(stack, &mut sp, 0, best.t) {
+                Some(e) => cur = e,
+                None => break,
             }
         }
         if best.kind == HitKind::Miss {
             return Ok(Hit::MISS);
         }
-        let inst = &tlas.instances[best.instance_slot as usize];
+        let Some(inst) = tlas.instances.get(best.instance_slot as usize) else {
+            return Ok(Hit::MISS);
+        };
         let view = self.blas(best.blas);
-        let id = view
-            .and_then(|v| v.prim_ids.get(best.prim_slot as usize).copied())
-            .unwrap_or(0);
-        let (geometry_index, primitive_index) = view.map_or((0, 0), |v| v.locate(id));
-        Ok(Hit {
-            kind: best.kind,
-            t: best.t,
-            instance_id: inst.instance_id,
-            instance_custom_index: inst.custom_index,
-            geometry_index,
-            primitive_index,
-            barycentrics: best.barycentrics,
-            front_face: best.front_face,
-        })
+        Ok(hit(&best, inst, view.as_ref()))
+    }
+}
+
+/// The hit record of `best` (found in instance `inst`, whose bottom level is `view`).
+#[inline(always)]
+fn hit(best: &Best, inst: &InstanceRecord, view: Option<&View>) -> Hit {
+    if best.kind == HitKind::Miss {
+        return Hit::MISS;
+    }
+    let id = view
+        .and_then(|v| v.prim_ids.get(best.prim_slot as usize).copied())
+        .unwrap_or(0);
+    let (geometry_index, primitive_index) = view.map_or((0, 0), |v| v.locate(id));
+    Hit {
+        kind: best.kind,
+        t: best.t,
+        instance_id: inst.instance_id,
+        instance_custom_index: inst.custom_index,
+        geometry_index,
+        primitive_index,
+        barycentrics: best.barycentrics,
+        front_face: best.front_face,
     }
 }
 
@@ -196,10 +242,8 @@ impl<'s> Tracer<'s> {
 struct World<'r> {
     ray: &'r Ray,
     boxes: BoxRay,
-    /// The world ray prepared for triangles, made at the first identity instance.
-    sheared: Option<ShearedRay>,
     /// The ray in the space of the current instance, when it is not the world's.
-    object: Option<(BoxRay, ShearedRay)>,
+    object: Option<BoxRay>,
 }
 
 /// Traverses the bottom level of instance `slot` on top of `stack` (entries above `sp`) when
@@ -244,18 +288,11 @@ fn enter<'s>(
     }
     // An identity instance sees the world ray: no transform, no new inverses, nothing copied.
     let local = if inst.hints & INSTANCE_IDENTITY != 0 {
-        let sheared = match &mut world.sheared {
-            Some(s) => &*s,
-            none => &*none.insert(ShearedRay::new(ray.origin, ray.direction)),
-        };
-        (&world.boxes, sheared)
+        &world.boxes
     } else {
         let w2o = Affine::from_rows(inst.world_to_object);
         let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
-        let moved = world
-            .object
-            .insert((BoxRay::new(o, d), ShearedRay::new(o, d)));
-        (&moved.0, &moved.1)
+        &*world.object.insert(BoxRay::new(o, d))
     };
     let at = BlasAt {
         view,
@@ -263,13 +300,27 @@ fn enter<'s>(
         slot,
         blas: bi,
     };
-    match local.1.perm {
-        0 => trace_blas::<0>(stack, sp, &at, local, ray, best, first_hit),
-        1 => trace_blas::<1>(stack, sp, &at, local, ray, best, first_hit),
-        2 => trace_blas::<2>(stack, sp, &at, local, ray, best, first_hit),
-        3 => trace_blas::<3>(stack, sp, &at, local, ray, best, first_hit),
-        4 => trace_blas::<4>(stack, sp, &at, local, ray, best, first_hit),
-        _ => trace_blas::<5>(stack, sp, &at, local, ray, best, first_hit),
+    walk_blas(stack, sp, &at, local, ray, best, first_hit)
+}
+
+/// [`trace_blas`] for the axis permutation of the ray (`local`: in the instance's space).
+#[inline(always)]
+fn walk_blas(
+    stack: &mut [Entry],
+    base: usize,
+    at: &BlasAt,
+    local: &BoxRay,
+    ray: &Ray,
+    best: &mut Best,
+    first_hit: bool,
+) -> bool {
+    match permutation(local.direction) {
+        0 => trace_blas::<0>(stack, base, at, local, ray, best, first_hit),
+        1 => trace_blas::<1>(stack, base, at, local, ray, best, first_hit),
+        2 => trace_blas::<2>(stack, base, at, local, ray, best, first_hit),
+        3 => trace_blas::<3>(stack, base, at, local, ray, best, first_hit),
+        4 => trace_blas::<4>(stack, base, at, local, ray, best, first_hit),
+        _ => trace_blas::<5>(stack, base, at, local, ray, best, first_hit),
     }
 }
 
@@ -296,14 +347,14 @@ struct BlasAt<'a, 's> {
 
 /// Traverses one instance's bottom-level structure on top of `stack` (entries above `base`),
 /// updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
-/// of the sheared ray (`local.1.perm == P`), so that the triangle test indexes nothing at run
-/// time. Not inlined: the bottom-level loop is the hot one and gets the registers to itself.
+/// of the ray (`permutation(boxes.direction) == P`), so that preparing the ray for the
+/// triangle test and the test itself index nothing at run time. Not inlined: the bottom-level loop is the hot one and gets the registers to itself.
 #[inline(never)]
 fn trace_blas<const P: usize>(
     stack: &mut [Entry],
     base: usize,
     at: &BlasAt,
-    local: (&BoxRay, &ShearedRay),
+    boxes: &BoxRay,
     ray: &Ray,
     best: &mut Best,
     first_hit: bool,
@@ -314,7 +365,7 @@ fn trace_blas<const P: usize>(
         slot,
         blas,
     } = *at;
-    let (boxes, sheared) = local;
+    let sheared = boxes.sheared::<P>();
     let flags = ray.flags;
     let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
     let flip = iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING);

@@ -54,23 +54,48 @@ struct Sheared {
     z: [f32; 3],
 }
 
+/// Which of the [`AXES`] permutations a ray with direction `dir` uses: `kz` is the dominant
+/// axis, and `kx, ky` are swapped when the ray points down `kz` (keeping the winding).
+#[inline(always)]
+pub fn permutation(dir: Vec3) -> usize {
+    let a = dir.map(f32::abs);
+    let kz = if a[0] >= a[1] && a[0] >= a[2] {
+        0
+    } else if a[1] >= a[2] {
+        1
+    } else {
+        2
+    };
+    // `dir[kz] < 0` without indexing by a run-time value (which would go through memory).
+    let down =
+        usize::from(dir[0] < 0.0) | usize::from(dir[1] < 0.0) << 1 | usize::from(dir[2] < 0.0) << 2;
+    2 * kz + (down >> kz & 1)
+}
+
 impl ShearedRay {
     #[inline(always)]
     pub fn new(origin: Vec3, dir: Vec3) -> ShearedRay {
-        let a = [dir[0].abs(), dir[1].abs(), dir[2].abs()];
-        let kz = if a[0] >= a[1] && a[0] >= a[2] {
-            0
-        } else if a[1] >= a[2] {
-            1
-        } else {
-            2
-        };
-        let perm = 2 * kz + usize::from(dir[kz] < 0.0);
-        let (kx, ky, _) = AXES[perm];
+        let perm = permutation(dir);
+        let (kx, ky, kz) = AXES[perm];
         let sz = 1.0 / dir[kz];
         ShearedRay {
             origin,
             perm,
+            sx: dir[kx] * sz,
+            sy: dir[ky] * sz,
+            sz,
+        }
+    }
+
+    /// [`ShearedRay::new`] for a ray whose [`permutation`] is `P`, given `inv = 1 / dir` per
+    /// axis (the box test's): no run-time axis indexing, no division.
+    #[inline(always)]
+    pub fn for_axes<const P: usize>(origin: Vec3, dir: Vec3, inv: Vec3) -> ShearedRay {
+        let (kx, ky, kz) = AXES[P];
+        let sz = inv[kz];
+        ShearedRay {
+            origin,
+            perm: P,
             sx: dir[kx] * sz,
             sy: dir[ky] * sz,
             sz,
@@ -207,6 +232,53 @@ mod tests {
         [
             p[0][0], p[0][1], p[0][2], p[1][0], p[1][1], p[1][2], p[2][0], p[2][1], p[2][2],
         ]
+    }
+
+    /// `permutation` avoids indexing by `kz`; it must pick what the definition says, for
+    /// signed zeros, ties and non-finite components too, and `for_axes` must agree with `new`.
+    #[test]
+    fn permutation_and_for_axes_follow_the_definition() {
+        let values = [
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            -2.0,
+            f32::INFINITY,
+            -f32::INFINITY,
+            1e-30,
+        ];
+        for x in values {
+            for y in values {
+                for z in values {
+                    let d = [x, y, z];
+                    let a = d.map(f32::abs);
+                    let kz = if a[0] >= a[1] && a[0] >= a[2] {
+                        0
+                    } else if a[1] >= a[2] {
+                        1
+                    } else {
+                        2
+                    };
+                    let perm = 2 * kz + usize::from(d[kz] < 0.0);
+                    assert_eq!(permutation(d), perm, "{d:?}");
+                    let inv = d.map(|c| 1.0 / c);
+                    let o = [0.5, -0.25, 2.0];
+                    let r = ShearedRay::new(o, d);
+                    let f = match perm {
+                        0 => ShearedRay::for_axes::<0>(o, d, inv),
+                        1 => ShearedRay::for_axes::<1>(o, d, inv),
+                        2 => ShearedRay::for_axes::<2>(o, d, inv),
+                        3 => ShearedRay::for_axes::<3>(o, d, inv),
+                        4 => ShearedRay::for_axes::<4>(o, d, inv),
+                        _ => ShearedRay::for_axes::<5>(o, d, inv),
+                    };
+                    let bits = |r: &ShearedRay| (r.perm, [r.sx, r.sy, r.sz].map(f32::to_bits));
+                    assert_eq!(bits(&r), bits(&f), "{d:?}");
+                }
+            }
+        }
     }
 
     #[test]
