@@ -168,12 +168,11 @@ pub(super) struct BoxRay {
     /// roundings as widening the product, so the same bound; three multiplications fewer per
     /// node).
     inv_far: Vec3,
-    /// Per axis: the ray goes towards smaller values, so a box's near plane is its max.
-    neg: [bool; 3],
     /// Per axis, the row of a node (seen as [`Node::rows`]) that holds the children's near
-    /// and far planes: chosen once per ray, not per node.
-    near_row: [usize; 3],
-    far_row: [usize; 3],
+    /// and far planes, chosen once per ray: the `hi_` row when the ray goes towards smaller
+    /// values (odd rows are `hi_`).
+    near_row: [u32; 3],
+    far_row: [u32; 3],
 }
 
 impl BoxRay {
@@ -182,15 +181,15 @@ impl BoxRay {
         // +-inf (never entered), and a ray lying exactly in a slab's plane gives 0 * inf = NaN,
         // which the min/max below drop (the ray is inside that slab, boundaries included).
         let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
-        let neg = inv.map(f32::is_sign_negative);
+        let neg = inv.map(|i| u32::from(i.is_sign_negative()));
+        let lo = Node::LO_ROWS.map(|r| r as u32);
         BoxRay {
             origin,
             direction: dir,
             inv,
             inv_far: inv.map(|i| i * ROBUST_FAR),
-            neg,
-            near_row: [0, 1, 2].map(|k| Node::LO_ROWS[k] + usize::from(neg[k])),
-            far_row: [0, 1, 2].map(|k| Node::LO_ROWS[k] + usize::from(!neg[k])),
+            near_row: [0, 1, 2].map(|k| lo[k] + neg[k]),
+            far_row: [0, 1, 2].map(|k| lo[k] + (neg[k] ^ 1)),
         }
     }
 
@@ -208,7 +207,7 @@ impl BoxRay {
     pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
         let rows = n.rows();
         // `& 7`: the rows are eight, so the index needs no bounds check.
-        let row = |r: usize| f32x8::from(rows[r & 7]);
+        let row = |r: u32| f32x8::from(rows[r as usize & 7]);
         let [nx, ny, nz] = self.near_row.map(row);
         let [fx, fy, fz] = self.far_row.map(row);
         let s = f32x8::splat;
@@ -239,7 +238,7 @@ impl BoxRay {
         let mut near = t_min;
         let mut far = t_max;
         for k in 0..3 {
-            let (lo, hi) = if self.neg[k] {
+            let (lo, hi) = if self.near_row[k] & 1 != 0 {
                 (b[k + 3], b[k])
             } else {
                 (b[k], b[k + 3])
