@@ -348,7 +348,8 @@ struct BlasAt<'a, 's> {
 /// Traverses one instance's bottom-level structure on top of `stack` (entries above `base`),
 /// updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
 /// of the ray (`permutation(boxes.direction) == P`), so that preparing the ray for the
-/// triangle test and the test itself index nothing at run time. Not inlined: the bottom-level loop is the hot one and gets the registers to itself.
+/// triangle test and the test itself index nothing at run time. Not inlined: the
+/// bottom-level loop is the hot one and gets the registers to itself.
 #[inline(never)]
 fn trace_blas<const P: usize>(
     stack: &mut [Entry],
