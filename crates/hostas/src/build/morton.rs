@@ -2,10 +2,9 @@
 //! each range at the highest bit in which its first and last codes differ (a top-down LBVH),
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 //!
-//! The passes: centroid bounds; keys `(code, position)` with the lowest digit's histogram, the
-//! references copied into `aux` on the way; three radix passes, each counting the next digit;
-//! the tree, whose leaves gather their references from `aux` in sorted order into `refs` (their
-//! final place) while computing their bounds.
+//! The passes: centroid bounds; keys `(code, position)` with the first digit's histogram;
+//! the radix sort; the tree, whose leaves gather their references from `refs` in sorted order
+//! into `aux` (their final place) while computing their bounds.
 
 use super::tree::{Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -207,8 +206,10 @@ fn deltas(sorted: &[u64], delta: &mut [u8]) {
         });
 }
 
+/// Builds the tree over `refs` (left as they are); the references in final order go into
+/// `aux`.
 pub fn build(
-    refs: &mut [PrimRef],
+    refs: &[PrimRef],
     aux: &mut [PrimRef],
     keys: &mut [u64],
     tmp: &mut [u64],
@@ -226,9 +227,9 @@ pub fn build(
             .map(|e| if e > 0.0 { 1023.0 / e } else { 0.0 }),
     );
     let lo = c.lo;
-    // Keys (code, position) and the histogram of the first digit sorted by, copying the
-    // references into `aux` on the way. Centroids lie in the bounds, so the scaled values are in [0, 1023]
-    // (up to rounding below 1024); NaN converts to i32::MIN, whose low bits are 0.
+    // Keys (code, position) and the histogram of the first digit sorted by. Centroids lie in
+    // the bounds, so the scaled values are in [0, 1023] (up to rounding below 1024); NaN
+    // converts to i32::MIN, whose low bits are 0.
     let keys = &mut keys[..n];
     let tmp = &mut tmp[..n];
     let aux = &mut aux[..n];
@@ -241,13 +242,11 @@ pub fn build(
     let h = keys
         .par_chunks_mut(CHUNK)
         .zip(refs.par_chunks(CHUNK))
-        .zip(aux.par_chunks_mut(CHUNK))
         .enumerate()
-        .map(move |(ci, ((ks, rs), xs))| {
+        .map(move |(ci, (ks, rs))| {
             let mut h = hist_new();
             let first = (ci * CHUNK) as u64;
-            for (i, ((k, r), x)) in ks.iter_mut().zip(rs).zip(xs.iter_mut()).enumerate() {
-                *x = *r;
+            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
                 let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
                 let code = (SPREAD[q[0] as usize & 1023] << 2)
                     | (SPREAD[q[1] as usize & 1023] << 1)
@@ -270,22 +269,22 @@ pub fn build(
     deltas(tmp, &mut delta[..n]);
     let ctx = Ctx {
         keys: tmp,
-        aux,
+        refs,
         top: &top,
         delta,
         leaf_max: max_leaf.max(WIDTH - 1),
     };
     let mut out = NodeList::new(nodes);
-    let (b, c) = ctx.build(0, refs, 0, &mut out);
+    let (b, c) = ctx.build(0, aux, 0, &mut out);
     out.tree(Some((b.aabb(), c)))
 }
 
 /// What every level of the tree reads.
 struct Ctx<'a> {
-    /// Sorted keys: code in the high half, position in `aux` in the low half.
+    /// Sorted keys: code in the high half, position in `refs` in the low half.
     keys: &'a [u64],
     /// The references in input order.
-    aux: &'a [PrimRef],
+    refs: &'a [PrimRef],
     /// Start of each top digit in the sorted order, then `n`.
     top: &'a [u32],
     /// Per sorted position, 1 + the highest bit in which its code and the next differ (0:
@@ -345,10 +344,10 @@ fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
 /// A leaf over sorted positions `keys`: gathers the references into `dst` and returns their
 /// bounds.
 #[inline(always)]
-fn leaf(keys: &[u64], aux: &[PrimRef], dst: &mut [PrimRef]) -> Box4 {
+fn leaf(keys: &[u64], refs: &[PrimRef], dst: &mut [PrimRef]) -> Box4 {
     let mut b = Box4::EMPTY;
     for (d, &k) in dst.iter_mut().zip(keys) {
-        let r = aux[k as u32 as usize];
+        let r = refs[k as u32 as usize];
         *d = r;
         b = b.union(r.box4());
     }
@@ -385,7 +384,7 @@ impl Ctx<'_> {
                 first: base as u32,
                 count: n as u32,
             };
-            return (leaf(keys, self.aux, dst), c);
+            return (leaf(keys, self.refs, dst), c);
         }
         // The parts, in position order, by their ends (each starts where the previous ends).
         let mut ends = [0usize; WIDTH];
@@ -456,7 +455,7 @@ impl Ctx<'_> {
                         first: (base + s) as u32,
                         count: (e - s) as u32,
                     };
-                    (leaf(&keys[s..e], self.aux, mine), c)
+                    (leaf(&keys[s..e], self.refs, mine), c)
                 } else {
                     self.build(base + s, mine, depth + 1, out)
                 };

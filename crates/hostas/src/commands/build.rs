@@ -548,7 +548,7 @@ impl Device {
         let data = &*data;
         self.with_dst_src(dst, None, at, |bytes, _| {
             // The builders write the nodes straight into the structure.
-            let tree = build::build(
+            let (tree, order) = build::build(
                 &preset,
                 refs,
                 &mut aux[..stored],
@@ -557,7 +557,7 @@ impl Device {
                 encode::node_section(bytes, &plan)?,
             );
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
-            write_prims(bytes, &header, prim_kind, refs, data)
+            write_prims(bytes, &header, prim_kind, order, data)
         })
     }
 
