@@ -18,7 +18,7 @@ use crate::layout::{
 use crate::math::{Aabb, Affine, Box4};
 use ash::vk;
 use rayon::prelude::*;
-use wide::f32x4;
+use wide::{f32x4, i32x4};
 
 /// `VkAccelerationStructureBuildSizesInfoKHR`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -910,7 +910,8 @@ struct F32Geometry<'a, const IDX: usize, const STRIDE: usize> {
     /// From `primitiveOffset` (indexed geometries).
     index: &'a [u8],
     verts: F32Verts<'a>,
-    first_vertex: usize,
+    /// (A `u32`, so that vertex offsets provably do not overflow.)
+    first_vertex: u32,
 }
 
 enum F32Tris<'a> {
@@ -945,23 +946,26 @@ impl<'a> F32Tris<'a> {
             stride: l.vertex_stride,
             count,
         };
+        let first_vertex = u32::try_from(l.first_vertex).ok()?;
         fn g<'a, const IDX: usize, const STRIDE: usize>(
             l: &F32Layout<'a>,
             verts: F32Verts<'a>,
+            first_vertex: u32,
         ) -> F32Geometry<'a, IDX, STRIDE> {
             F32Geometry {
                 index: l.index_data,
                 verts,
-                first_vertex: l.first_vertex,
+                first_vertex,
             }
         }
+        let fv = first_vertex;
         Some(match (l.index_size, l.vertex_stride == 12) {
-            (0, true) => F32Tris::I0(g(&l, verts)),
-            (2, true) => F32Tris::I2(g(&l, verts)),
-            (_, true) => F32Tris::I4(g(&l, verts)),
-            (0, false) => F32Tris::I0S(g(&l, verts)),
-            (2, false) => F32Tris::I2S(g(&l, verts)),
-            (_, false) => F32Tris::I4S(g(&l, verts)),
+            (0, true) => F32Tris::I0(g(&l, verts, fv)),
+            (2, true) => F32Tris::I2(g(&l, verts, fv)),
+            (_, true) => F32Tris::I4(g(&l, verts, fv)),
+            (0, false) => F32Tris::I0S(g(&l, verts, fv)),
+            (2, false) => F32Tris::I2S(g(&l, verts, fv)),
+            (_, false) => F32Tris::I4S(g(&l, verts, fv)),
         })
     }
 }
@@ -982,13 +986,15 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
             let b = self.index.get(3 * IDX * p..3 * IDX * (p + 1))?;
             [u(b, 0), u(b, 1), u(b, 2)]
         };
-        let fv = self.first_vertex;
+        let fv = self.first_vertex as usize;
         let v = [
             idx[0].wrapping_add(fv),
             idx[1].wrapping_add(fv),
             idx[2].wrapping_add(fv),
         ];
-        if v[0].max(v[1]).max(v[2]) >= self.verts.count {
+        // With 12-byte vertices the reads' own bounds checks are this test: the data ends
+        // where vertex `count - 1`'s 16 bytes do.
+        if STRIDE != 12 && v[0].max(v[1]).max(v[2]) >= self.verts.count {
             return None;
         }
         let mut verts = self.verts;
@@ -1021,6 +1027,9 @@ fn decode_tris(
     refs: &mut [PrimRef],
 ) -> Result<usize> {
     let mut inactive = 0;
+    // Lane 3 of the reference's low half: its sequence number, counted up as a vector.
+    let mut id = bytemuck::cast::<[u32; 4], i32x4>([0, 0, 0, first as u32]);
+    let next = i32x4::new([0, 0, 0, 1]);
     for (j, (out, r)) in outs.iter_mut().zip(refs.iter_mut()).enumerate() {
         let [a, b, c] = match s.get(base + j) {
             Some(v) => v,
@@ -1034,17 +1043,30 @@ fn decode_tris(
         out[..16].copy_from_slice(&bytes(a));
         out[12..28].copy_from_slice(&bytes(b));
         out[24..].copy_from_slice(&bytes(c)[..12]);
-        // The bounds as `Aabb::point` and `grow` make them.
+        // The bounds as `Aabb::point` and `grow` make them, lane 3 the id (low) and whether
+        // it is inactive (high).
         let tri = Box4::triangle(a, b, c);
-        let (mut lo, mut hi) = (tri.lo.to_array(), tri.hi.to_array());
-        let dead = a.as_array()[0].is_nan();
-        inactive += dead as usize;
-        lo[3] = f32::from_bits((first + j) as u32);
-        hi[3] = f32::from_bits(dead as u32);
+        let lo = (tri.lo & XYZ) | bytemuck::cast::<i32x4, f32x4>(id);
+        let mut hi = tri.hi & XYZ;
+        id += next;
+        if a.as_array()[0].is_nan() {
+            inactive += 1;
+            hi |= DEAD;
+        }
         *r = bytemuck::cast([lo, hi]);
     }
     Ok(inactive)
 }
+
+/// Keeps lanes 0..3.
+const XYZ: f32x4 = f32x4::new([
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    0.0,
+]);
+/// Lane 3 of an inactive reference's high half (`pad = 1`).
+const DEAD: f32x4 = f32x4::new([0.0, 0.0, 0.0, f32::from_bits(1)]);
 
 fn internal(what: &str) -> Error {
     Error::NotSupported(format!("internal: {what}"))
