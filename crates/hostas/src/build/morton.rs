@@ -2,7 +2,7 @@
 //! each range at the highest bit in which its first and last codes differ (a top-down LBVH),
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 //!
-//! The passes: centroid bounds; keys `(code, position)` with the first digit's histogram;
+//! The passes: centroid bounds (unless the decoder computed them); keys `(code, position)` with the first digit's histogram;
 //! the radix sort; the tree, whose leaves gather their references from `refs` in sorted order
 //! into `aux` (their final place) while computing their bounds.
 
@@ -208,11 +208,13 @@ fn deltas(sorted: &[u64], delta: &mut [u8]) {
 
 /// Builds the tree over `refs` (left as they are); the references in final order go into
 /// `aux`.
+/// `centroids`: the bounds of the doubled centroids where the decoder computed them.
 pub fn build(
     refs: &[PrimRef],
     aux: &mut [PrimRef],
     keys: &mut [u64],
     tmp: &mut [u64],
+    centroids: Option<Box4>,
     max_leaf: usize,
     nodes: &mut [Node],
 ) -> Tree {
@@ -220,7 +222,7 @@ pub fn build(
     if n == 0 {
         return NodeList::new(nodes).tree(None);
     }
-    let c = centroid_bounds(refs);
+    let c = centroids.unwrap_or_else(|| centroid_bounds(refs));
     let ext = c.hi - c.lo;
     let scale = f32x4::from(
         ext.to_array()

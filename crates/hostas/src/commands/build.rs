@@ -507,6 +507,8 @@ impl Device {
         } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
 
         // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
+        // Triangles come with the bounds of their centroids (for the Morton builder).
+        let mut centroids = None;
         let stored = match prim_kind {
             PrimKind::Instances => {
                 let Some(Reader::Instances(r)) = readers.first() else {
@@ -529,7 +531,9 @@ impl Device {
                 stored
             }
             PrimKind::Triangles | PrimKind::Aabbs => {
-                decode_geometries(&readers, &records, refs, data)?
+                let (stored, cb) = decode_geometries(&readers, &records, refs, data)?;
+                centroids = cb;
+                stored
             }
             PrimKind::None => 0,
         };
@@ -554,6 +558,7 @@ impl Device {
                 &mut aux[..stored],
                 &mut keys[..stored],
                 &mut keys_tmp[..stored],
+                centroids,
                 encode::node_section(bytes, &plan)?,
             );
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
@@ -760,8 +765,9 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scrat
 }
 
 /// Decodes all triangles or AABBs into `data` (indexed by sequence number) and writes a
-/// `PrimRef` per active primitive into `refs`; returns how many are active. Parallel over
-/// chunks; the first error in primitive order is reported.
+/// `PrimRef` per active primitive into `refs`; returns how many are active, and for triangles
+/// the bounds of their doubled centroids (see [`decode_tris`]). Parallel over chunks; the first
+/// error in primitive order is reported.
 ///
 /// Each primitive's reference is first written at its sequence number (an inactive one marked
 /// by `pad = 1`); when some are inactive, one pass then closes the gaps in order.
@@ -770,9 +776,12 @@ fn decode_geometries(
     records: &[GeometryRecord],
     refs: &mut [PrimRef],
     data: &mut [u8],
-) -> Result<usize> {
+) -> Result<(usize, Option<Box4>)> {
     const CHUNK: usize = 4096;
     let mut inactive = 0usize;
+    // Chunks' bounds united in order: without NaN, min and max (the later operand on ties)
+    // do not depend on the grouping, so this is the bounds the builder would compute.
+    let mut centroids = Some(Box4::EMPTY);
     for (reader, rec) in readers.iter().zip(records) {
         let first = rec.first_primitive as usize;
         let count = rec.primitive_count as usize;
@@ -782,19 +791,20 @@ fn decode_geometries(
         };
         let geom_data = &mut data[first * size..(first + count) * size];
         let geom_refs = &mut refs[first..first + count];
-        let results: Vec<Result<usize>> = geom_data
+        let results: Vec<Result<(usize, Option<Box4>)>> = geom_data
             .par_chunks_mut(CHUNK * size)
             .zip(geom_refs.par_chunks_mut(CHUNK))
             .enumerate()
             .map(|(c, (chunk, chunk_refs))| {
                 let mut inactive = 0;
+                let mut centroids = None;
                 let base = c * CHUNK;
                 match reader {
                     Reader::Triangles(t) => {
                         let outs: &mut [[u8; TRI_BYTES]] = bytemuck::try_cast_slice_mut(chunk)
                             .map_err(|_| internal("triangle slots"))?;
                         let first = first + base;
-                        inactive = match F32Tris::new(t) {
+                        let (dead, cb) = match F32Tris::new(t) {
                             Some(F32Tris::I0(d)) => {
                                 decode_tris(&d, t, base, first, outs, chunk_refs)
                             }
@@ -815,6 +825,7 @@ fn decode_geometries(
                             }
                             None => decode_tris(t, t, base, first, outs, chunk_refs),
                         }?;
+                        (inactive, centroids) = (dead, cb);
                     }
                     Reader::Aabbs(a) => {
                         let outs = chunk.chunks_exact_mut(24);
@@ -836,16 +847,18 @@ fn decode_geometries(
                     }
                     Reader::Instances(_) => {}
                 }
-                Ok(inactive)
+                Ok((inactive, centroids))
             })
             .collect();
         for r in results {
-            inactive += r?;
+            let (dead, cb) = r?;
+            inactive += dead;
+            centroids = centroids.zip(cb).map(|(a, b)| a.union(b));
         }
     }
     let total: usize = records.iter().map(|r| r.primitive_count as usize).sum();
     if inactive == 0 {
-        return Ok(total);
+        return Ok((total, centroids));
     }
     // Close the gaps left by inactive primitives, keeping the order.
     let mut stored = 0usize;
@@ -856,7 +869,7 @@ fn decode_geometries(
             stored += 1;
         }
     }
-    Ok(stored)
+    Ok((stored, centroids))
 }
 
 /// Triangles of one geometry as three vertices (lane 3 unspecified): `None` where the reader
@@ -1015,8 +1028,11 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
 }
 
 /// Decodes triangles `base..` of `t` into `outs` and their references (sequence numbers from
-/// `first`) into `refs`; returns how many are inactive. `s` decodes the common cases, the
-/// reader the others (and reports what is wrong).
+/// `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
+/// doubled centroids (`lo + hi`, lane 3 zero), united in order as the Morton builder would
+/// (saving it a pass over the references), or `None` when a centroid has a NaN lane (then the
+/// result depends on the grouping). `s` decodes the common cases, the reader the others (and
+/// reports what is wrong).
 #[inline(always)]
 fn decode_tris(
     s: &impl TriSource,
@@ -1025,8 +1041,10 @@ fn decode_tris(
     first: usize,
     outs: &mut [[u8; TRI_BYTES]],
     refs: &mut [PrimRef],
-) -> Result<usize> {
+) -> Result<(usize, Option<Box4>)> {
     let mut inactive = 0;
+    let mut centroids = Box4::EMPTY;
+    let mut nan = f32x4::ZERO;
     // Lane 3 of the reference's low half: its sequence number, counted up as a vector.
     let mut id = bytemuck::cast::<[u32; 4], i32x4>([0, 0, 0, first as u32]);
     let next = i32x4::new([0, 0, 0, 1]);
@@ -1046,16 +1064,21 @@ fn decode_tris(
         // The bounds as `Aabb::point` and `grow` make them, lane 3 the id (low) and whether
         // it is inactive (high).
         let tri = Box4::triangle(a, b, c);
-        let lo = (tri.lo & XYZ) | bytemuck::cast::<i32x4, f32x4>(id);
-        let mut hi = tri.hi & XYZ;
+        let (lo, hi) = (tri.lo & XYZ, tri.hi & XYZ);
+        let dead = a.as_array()[0].is_nan();
+        let mark = if dead { DEAD } else { f32x4::ZERO };
+        *r = bytemuck::cast([lo | bytemuck::cast::<i32x4, f32x4>(id), hi | mark]);
         id += next;
-        if a.as_array()[0].is_nan() {
+        if dead {
             inactive += 1;
-            hi |= DEAD;
+        } else {
+            let c = lo + hi;
+            centroids = centroids.union(Box4 { lo: c, hi: c });
+            nan |= c.is_nan();
         }
-        *r = bytemuck::cast([lo, hi]);
     }
-    Ok(inactive)
+    let clean = nan.to_bitmask() == 0;
+    Ok((inactive, clean.then_some(centroids)))
 }
 
 /// Keeps lanes 0..3.
