@@ -312,6 +312,16 @@ fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
     if n <= LINEAR_SPLIT {
         // The one pair in the range that differs in `bit`, 32 pairs at a time.
         let want = u8x32::splat(bit as u8 + 1);
+        if n <= 33 {
+            // Up to 32 pairs (most ranges): one load, no loop.
+            if let Some(d) = delta.get(base..base + 32) {
+                let d: [u8; 32] = d.try_into().unwrap_or([0; 32]);
+                let hits = u8x32::from(d).simd_eq(want).to_bitmask() & (u32::MAX >> (33 - n));
+                if hits != 0 {
+                    return hits.trailing_zeros() as usize + 1;
+                }
+            }
+        }
         let mut at = 0;
         while at + 1 < n {
             let Some(d) = delta.get(base + at..base + at + 32) else {
