@@ -11,7 +11,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{LEAF_BIT, Node, WIDTH};
 use crate::math::Box4;
 use rayon::prelude::*;
-use wide::{f32x4, u8x32};
+use wide::{f32x4, f64x4, u8x32, u64x4};
 
 /// Spreads the low 10 bits of `v` to every third bit.
 const fn spread(v: u32) -> u32 {
@@ -198,12 +198,31 @@ fn deltas(sorted: &[u64], delta: &mut [u8]) {
         .for_each(|(ci, (d, ks))| {
             let f = |a: u64, b: u64| (64 - ((a ^ b) >> 32).leading_zeros()) as u8;
             let (body, last) = d.split_at_mut(d.len() - 1);
-            for (d, w) in body.iter_mut().zip(ks.windows(2)) {
+            let mut quads = body.chunks_exact_mut(4);
+            for (q, w) in (&mut quads).zip(ks.windows(5).step_by(4)) {
+                q.copy_from_slice(&deltas4(w));
+            }
+            let rest = quads.into_remainder();
+            let done = ks.len() - 1 - rest.len();
+            for (d, w) in rest.iter_mut().zip(ks[done..].windows(2)) {
                 *d = f(w[0], w[1]);
             }
             let (a, next) = (ks[ks.len() - 1], sorted.get((ci + 1) * CHUNK));
             last[0] = next.map_or(0, |&b| f(a, b));
         });
+}
+
+/// The deltas of the four pairs in `w` (five keys). AVX2 has no vector `lzcnt`: the number of
+/// bits of `x` (the codes' XOR) is the exponent of `2x + 1` (odd, so 0 counts none), read off
+/// its exact `f64`, made by the 2^52 trick.
+#[inline(always)]
+fn deltas4(w: &[u64]) -> [u8; 4] {
+    const MAGIC: u64 = 0x4330_0000_0000_0000;
+    let at = |k: usize| u64x4::from(<[u64; 4]>::try_from(&w[k..k + 4]).unwrap_or_default());
+    let x = ((at(0) ^ at(1)) >> 32_u32) << 1_u32 | u64x4::splat(MAGIC | 1);
+    let v = bytemuck::cast::<u64x4, f64x4>(x) - f64x4::splat(f64::from_bits(MAGIC));
+    let e: u64x4 = bytemuck::cast::<f64x4, u64x4>(v) >> 52_u32;
+    e.to_array().map(|e| (e - 1023) as u8)
 }
 
 /// Builds the tree over `refs` (left as they are); the references in final order go into
