@@ -142,26 +142,36 @@ pub(crate) const PARALLEL_THRESHOLD: usize = 4096;
 /// Past this depth the builders split at the object median, which bounds the depth.
 pub(crate) const MEDIAN_DEPTH: u32 = 40;
 
-/// Builds a tree over `refs`, reordering them: leaves refer to final positions in `refs`.
-/// `aux`, `keys` and `keys_tmp` are working space of the same length (from build scratch);
-/// the inner nodes are written into `nodes` (the structure's node section).
-pub fn build(
+/// Builds a tree over `refs` and returns it with the references in final order (leaves refer
+/// to positions there): `refs` reordered (SAH) or `aux` (Morton, whose leaves gather them
+/// there from `refs`, which saves copying them). `aux`, `keys` and `keys_tmp` are working
+/// space of the same length (from build scratch); `centroids`, where the decoder computed
+/// them, the bounds of the references' doubled centroids (`lo + hi`, lane 3 zero); the inner
+/// nodes are written into `nodes` (the structure's node section).
+pub fn build<'a>(
     preset: &Preset,
-    refs: &mut [PrimRef],
-    aux: &mut [PrimRef],
+    refs: &'a mut [PrimRef],
+    aux: &'a mut [PrimRef],
     keys: &mut [u64],
     keys_tmp: &mut [u64],
+    centroids: Option<Box4>,
     nodes: &mut [crate::layout::Node],
-) -> tree::Tree {
+) -> (tree::Tree, &'a [PrimRef]) {
     match preset.algorithm {
-        Algorithm::BinnedSah { bins } => binned_sah::build(
-            refs,
-            aux,
-            bins,
-            preset.max_leaf,
-            preset.traversal_cost,
-            nodes,
-        ),
-        Algorithm::Morton => morton::build(refs, aux, keys, keys_tmp, preset.max_leaf, nodes),
+        Algorithm::BinnedSah { bins } => {
+            let tree = binned_sah::build(
+                refs,
+                aux,
+                bins,
+                preset.max_leaf,
+                preset.traversal_cost,
+                nodes,
+            );
+            (tree, refs)
+        }
+        Algorithm::Morton => {
+            let tree = morton::build(refs, aux, keys, keys_tmp, centroids, preset.max_leaf, nodes);
+            (tree, aux)
+        }
     }
 }

@@ -2,17 +2,16 @@
 //! each range at the highest bit in which its first and last codes differ (a top-down LBVH),
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 //!
-//! The passes: centroid bounds; keys `(code, position)` with the lowest digit's histogram, the
-//! references copied into `aux` on the way; three radix passes, each counting the next digit;
-//! the tree, whose leaves gather their references from `aux` in sorted order into `refs` (their
-//! final place) while computing their bounds.
+//! The passes: centroid bounds (unless the decoder computed them); keys `(code, position)` with the first digit's histogram;
+//! the radix sort; the tree, whose leaves gather their references from `refs` in sorted order
+//! into `aux` (their final place) while computing their bounds.
 
 use super::tree::{Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{LEAF_BIT, Node, WIDTH};
 use crate::math::Box4;
 use rayon::prelude::*;
-use wide::{f32x4, u8x32};
+use wide::{f32x4, f64x4, u8x32, u64x4};
 
 /// Spreads the low 10 bits of `v` to every third bit.
 const fn spread(v: u32) -> u32 {
@@ -199,7 +198,13 @@ fn deltas(sorted: &[u64], delta: &mut [u8]) {
         .for_each(|(ci, (d, ks))| {
             let f = |a: u64, b: u64| (64 - ((a ^ b) >> 32).leading_zeros()) as u8;
             let (body, last) = d.split_at_mut(d.len() - 1);
-            for (d, w) in body.iter_mut().zip(ks.windows(2)) {
+            let mut quads = body.chunks_exact_mut(4);
+            for (q, w) in (&mut quads).zip(ks.windows(5).step_by(4)) {
+                q.copy_from_slice(&deltas4(w));
+            }
+            let rest = quads.into_remainder();
+            let done = ks.len() - 1 - rest.len();
+            for (d, w) in rest.iter_mut().zip(ks[done..].windows(2)) {
                 *d = f(w[0], w[1]);
             }
             let (a, next) = (ks[ks.len() - 1], sorted.get((ci + 1) * CHUNK));
@@ -207,11 +212,28 @@ fn deltas(sorted: &[u64], delta: &mut [u8]) {
         });
 }
 
+/// The deltas of the four pairs in `w` (five keys). AVX2 has no vector `lzcnt`: the number of
+/// bits of `x` (the codes' XOR) is the exponent of `2x + 1` (odd, so 0 counts none), read off
+/// its exact `f64`, made by the 2^52 trick.
+#[inline(always)]
+fn deltas4(w: &[u64]) -> [u8; 4] {
+    const MAGIC: u64 = 0x4330_0000_0000_0000;
+    let at = |k: usize| u64x4::from(<[u64; 4]>::try_from(&w[k..k + 4]).unwrap_or_default());
+    let x = ((at(0) ^ at(1)) >> 32_u32) << 1_u32 | u64x4::splat(MAGIC | 1);
+    let v = bytemuck::cast::<u64x4, f64x4>(x) - f64x4::splat(f64::from_bits(MAGIC));
+    let e: u64x4 = bytemuck::cast::<f64x4, u64x4>(v) >> 52_u32;
+    e.to_array().map(|e| (e - 1023) as u8)
+}
+
+/// Builds the tree over `refs` (left as they are); the references in final order go into
+/// `aux`.
+/// `centroids`: the bounds of the doubled centroids where the decoder computed them.
 pub fn build(
-    refs: &mut [PrimRef],
+    refs: &[PrimRef],
     aux: &mut [PrimRef],
     keys: &mut [u64],
     tmp: &mut [u64],
+    centroids: Option<Box4>,
     max_leaf: usize,
     nodes: &mut [Node],
 ) -> Tree {
@@ -219,16 +241,16 @@ pub fn build(
     if n == 0 {
         return NodeList::new(nodes).tree(None);
     }
-    let c = centroid_bounds(refs);
+    let c = centroids.unwrap_or_else(|| centroid_bounds(refs));
     let ext = c.hi - c.lo;
     let scale = f32x4::from(
         ext.to_array()
             .map(|e| if e > 0.0 { 1023.0 / e } else { 0.0 }),
     );
     let lo = c.lo;
-    // Keys (code, position) and the histogram of the first digit sorted by, copying the
-    // references into `aux` on the way. Centroids lie in the bounds, so the scaled values are in [0, 1023]
-    // (up to rounding below 1024); NaN converts to i32::MIN, whose low bits are 0.
+    // Keys (code, position) and the histogram of the first digit sorted by. Centroids lie in
+    // the bounds, so the scaled values are in [0, 1023] (up to rounding below 1024); NaN
+    // converts to i32::MIN, whose low bits are 0.
     let keys = &mut keys[..n];
     let tmp = &mut tmp[..n];
     let aux = &mut aux[..n];
@@ -241,13 +263,11 @@ pub fn build(
     let h = keys
         .par_chunks_mut(CHUNK)
         .zip(refs.par_chunks(CHUNK))
-        .zip(aux.par_chunks_mut(CHUNK))
         .enumerate()
-        .map(move |(ci, ((ks, rs), xs))| {
+        .map(move |(ci, (ks, rs))| {
             let mut h = hist_new();
             let first = (ci * CHUNK) as u64;
-            for (i, ((k, r), x)) in ks.iter_mut().zip(rs).zip(xs.iter_mut()).enumerate() {
-                *x = *r;
+            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
                 let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
                 let code = (SPREAD[q[0] as usize & 1023] << 2)
                     | (SPREAD[q[1] as usize & 1023] << 1)
@@ -270,22 +290,22 @@ pub fn build(
     deltas(tmp, &mut delta[..n]);
     let ctx = Ctx {
         keys: tmp,
-        aux,
+        refs,
         top: &top,
         delta,
         leaf_max: max_leaf.max(WIDTH - 1),
     };
     let mut out = NodeList::new(nodes);
-    let (b, c) = ctx.build(0, refs, 0, &mut out);
+    let (b, c) = ctx.build(0, aux, 0, &mut out);
     out.tree(Some((b.aabb(), c)))
 }
 
 /// What every level of the tree reads.
 struct Ctx<'a> {
-    /// Sorted keys: code in the high half, position in `aux` in the low half.
+    /// Sorted keys: code in the high half, position in `refs` in the low half.
     keys: &'a [u64],
     /// The references in input order.
-    aux: &'a [PrimRef],
+    refs: &'a [PrimRef],
     /// Start of each top digit in the sorted order, then `n`.
     top: &'a [u32],
     /// Per sorted position, 1 + the highest bit in which its code and the next differ (0:
@@ -311,6 +331,16 @@ fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
     if n <= LINEAR_SPLIT {
         // The one pair in the range that differs in `bit`, 32 pairs at a time.
         let want = u8x32::splat(bit as u8 + 1);
+        if n <= 33 {
+            // Up to 32 pairs (most ranges): one load, no loop.
+            if let Some(d) = delta.get(base..base + 32) {
+                let d: [u8; 32] = d.try_into().unwrap_or([0; 32]);
+                let hits = u8x32::from(d).simd_eq(want).to_bitmask() & (u32::MAX >> (33 - n));
+                if hits != 0 {
+                    return hits.trailing_zeros() as usize + 1;
+                }
+            }
+        }
         let mut at = 0;
         while at + 1 < n {
             let Some(d) = delta.get(base + at..base + at + 32) else {
@@ -345,10 +375,10 @@ fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
 /// A leaf over sorted positions `keys`: gathers the references into `dst` and returns their
 /// bounds.
 #[inline(always)]
-fn leaf(keys: &[u64], aux: &[PrimRef], dst: &mut [PrimRef]) -> Box4 {
+fn leaf(keys: &[u64], refs: &[PrimRef], dst: &mut [PrimRef]) -> Box4 {
     let mut b = Box4::EMPTY;
     for (d, &k) in dst.iter_mut().zip(keys) {
-        let r = aux[k as u32 as usize];
+        let r = refs[k as u32 as usize];
         *d = r;
         b = b.union(r.box4());
     }
@@ -385,7 +415,7 @@ impl Ctx<'_> {
                 first: base as u32,
                 count: n as u32,
             };
-            return (leaf(keys, self.aux, dst), c);
+            return (leaf(keys, self.refs, dst), c);
         }
         // The parts, in position order, by their ends (each starts where the previous ends).
         let mut ends = [0usize; WIDTH];
@@ -456,7 +486,7 @@ impl Ctx<'_> {
                         first: (base + s) as u32,
                         count: (e - s) as u32,
                     };
-                    (leaf(&keys[s..e], self.aux, mine), c)
+                    (leaf(&keys[s..e], self.refs, mine), c)
                 } else {
                     self.build(base + s, mine, depth + 1, out)
                 };

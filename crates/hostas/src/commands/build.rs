@@ -18,7 +18,7 @@ use crate::layout::{
 use crate::math::{Aabb, Affine, Box4};
 use ash::vk;
 use rayon::prelude::*;
-use wide::f32x4;
+use wide::{f32x4, i32x4};
 
 /// `VkAccelerationStructureBuildSizesInfoKHR`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -507,6 +507,8 @@ impl Device {
         } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
 
         // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
+        // Triangles come with the bounds of their centroids (for the Morton builder).
+        let mut centroids = None;
         let stored = match prim_kind {
             PrimKind::Instances => {
                 let Some(Reader::Instances(r)) = readers.first() else {
@@ -529,7 +531,9 @@ impl Device {
                 stored
             }
             PrimKind::Triangles | PrimKind::Aabbs => {
-                decode_geometries(&readers, &records, refs, data)?
+                let (stored, cb) = decode_geometries(&readers, &records, refs, data)?;
+                centroids = cb;
+                stored
             }
             PrimKind::None => 0,
         };
@@ -548,16 +552,17 @@ impl Device {
         let data = &*data;
         self.with_dst_src(dst, None, at, |bytes, _| {
             // The builders write the nodes straight into the structure.
-            let tree = build::build(
+            let (tree, order) = build::build(
                 &preset,
                 refs,
                 &mut aux[..stored],
                 &mut keys[..stored],
                 &mut keys_tmp[..stored],
+                centroids,
                 encode::node_section(bytes, &plan)?,
             );
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
-            write_prims(bytes, &header, prim_kind, refs, data)
+            write_prims(bytes, &header, prim_kind, order, data)
         })
     }
 
@@ -760,8 +765,9 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scrat
 }
 
 /// Decodes all triangles or AABBs into `data` (indexed by sequence number) and writes a
-/// `PrimRef` per active primitive into `refs`; returns how many are active. Parallel over
-/// chunks; the first error in primitive order is reported.
+/// `PrimRef` per active primitive into `refs`; returns how many are active, and for triangles
+/// the bounds of their doubled centroids (see [`decode_tris`]). Parallel over chunks; the first
+/// error in primitive order is reported.
 ///
 /// Each primitive's reference is first written at its sequence number (an inactive one marked
 /// by `pad = 1`); when some are inactive, one pass then closes the gaps in order.
@@ -770,9 +776,12 @@ fn decode_geometries(
     records: &[GeometryRecord],
     refs: &mut [PrimRef],
     data: &mut [u8],
-) -> Result<usize> {
+) -> Result<(usize, Option<Box4>)> {
     const CHUNK: usize = 4096;
     let mut inactive = 0usize;
+    // Chunks' bounds united in order: without NaN, min and max (the later operand on ties)
+    // do not depend on the grouping, so this is the bounds the builder would compute.
+    let mut centroids = Some(Box4::EMPTY);
     for (reader, rec) in readers.iter().zip(records) {
         let first = rec.first_primitive as usize;
         let count = rec.primitive_count as usize;
@@ -782,19 +791,20 @@ fn decode_geometries(
         };
         let geom_data = &mut data[first * size..(first + count) * size];
         let geom_refs = &mut refs[first..first + count];
-        let results: Vec<Result<usize>> = geom_data
+        let results: Vec<Result<(usize, Option<Box4>)>> = geom_data
             .par_chunks_mut(CHUNK * size)
             .zip(geom_refs.par_chunks_mut(CHUNK))
             .enumerate()
             .map(|(c, (chunk, chunk_refs))| {
                 let mut inactive = 0;
+                let mut centroids = None;
                 let base = c * CHUNK;
                 match reader {
                     Reader::Triangles(t) => {
                         let outs: &mut [[u8; TRI_BYTES]] = bytemuck::try_cast_slice_mut(chunk)
                             .map_err(|_| internal("triangle slots"))?;
                         let first = first + base;
-                        inactive = match F32Tris::new(t) {
+                        let (dead, cb) = match F32Tris::new(t) {
                             Some(F32Tris::I0(d)) => {
                                 decode_tris(&d, t, base, first, outs, chunk_refs)
                             }
@@ -815,6 +825,7 @@ fn decode_geometries(
                             }
                             None => decode_tris(t, t, base, first, outs, chunk_refs),
                         }?;
+                        (inactive, centroids) = (dead, cb);
                     }
                     Reader::Aabbs(a) => {
                         let outs = chunk.chunks_exact_mut(24);
@@ -836,16 +847,18 @@ fn decode_geometries(
                     }
                     Reader::Instances(_) => {}
                 }
-                Ok(inactive)
+                Ok((inactive, centroids))
             })
             .collect();
         for r in results {
-            inactive += r?;
+            let (dead, cb) = r?;
+            inactive += dead;
+            centroids = centroids.zip(cb).map(|(a, b)| a.union(b));
         }
     }
     let total: usize = records.iter().map(|r| r.primitive_count as usize).sum();
     if inactive == 0 {
-        return Ok(total);
+        return Ok((total, centroids));
     }
     // Close the gaps left by inactive primitives, keeping the order.
     let mut stored = 0usize;
@@ -856,7 +869,7 @@ fn decode_geometries(
             stored += 1;
         }
     }
-    Ok(stored)
+    Ok((stored, centroids))
 }
 
 /// Triangles of one geometry as three vertices (lane 3 unspecified): `None` where the reader
@@ -910,7 +923,8 @@ struct F32Geometry<'a, const IDX: usize, const STRIDE: usize> {
     /// From `primitiveOffset` (indexed geometries).
     index: &'a [u8],
     verts: F32Verts<'a>,
-    first_vertex: usize,
+    /// (A `u32`, so that vertex offsets provably do not overflow.)
+    first_vertex: u32,
 }
 
 enum F32Tris<'a> {
@@ -945,23 +959,26 @@ impl<'a> F32Tris<'a> {
             stride: l.vertex_stride,
             count,
         };
+        let first_vertex = u32::try_from(l.first_vertex).ok()?;
         fn g<'a, const IDX: usize, const STRIDE: usize>(
             l: &F32Layout<'a>,
             verts: F32Verts<'a>,
+            first_vertex: u32,
         ) -> F32Geometry<'a, IDX, STRIDE> {
             F32Geometry {
                 index: l.index_data,
                 verts,
-                first_vertex: l.first_vertex,
+                first_vertex,
             }
         }
+        let fv = first_vertex;
         Some(match (l.index_size, l.vertex_stride == 12) {
-            (0, true) => F32Tris::I0(g(&l, verts)),
-            (2, true) => F32Tris::I2(g(&l, verts)),
-            (_, true) => F32Tris::I4(g(&l, verts)),
-            (0, false) => F32Tris::I0S(g(&l, verts)),
-            (2, false) => F32Tris::I2S(g(&l, verts)),
-            (_, false) => F32Tris::I4S(g(&l, verts)),
+            (0, true) => F32Tris::I0(g(&l, verts, fv)),
+            (2, true) => F32Tris::I2(g(&l, verts, fv)),
+            (_, true) => F32Tris::I4(g(&l, verts, fv)),
+            (0, false) => F32Tris::I0S(g(&l, verts, fv)),
+            (2, false) => F32Tris::I2S(g(&l, verts, fv)),
+            (_, false) => F32Tris::I4S(g(&l, verts, fv)),
         })
     }
 }
@@ -982,13 +999,15 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
             let b = self.index.get(3 * IDX * p..3 * IDX * (p + 1))?;
             [u(b, 0), u(b, 1), u(b, 2)]
         };
-        let fv = self.first_vertex;
+        let fv = self.first_vertex as usize;
         let v = [
             idx[0].wrapping_add(fv),
             idx[1].wrapping_add(fv),
             idx[2].wrapping_add(fv),
         ];
-        if v[0].max(v[1]).max(v[2]) >= self.verts.count {
+        // With 12-byte vertices the reads' own bounds checks are this test: the data ends
+        // where vertex `count - 1`'s 16 bytes do.
+        if STRIDE != 12 && v[0].max(v[1]).max(v[2]) >= self.verts.count {
             return None;
         }
         let mut verts = self.verts;
@@ -1009,8 +1028,11 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
 }
 
 /// Decodes triangles `base..` of `t` into `outs` and their references (sequence numbers from
-/// `first`) into `refs`; returns how many are inactive. `s` decodes the common cases, the
-/// reader the others (and reports what is wrong).
+/// `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
+/// doubled centroids (`lo + hi`, lane 3 zero), united in order as the Morton builder would
+/// (saving it a pass over the references), or `None` when a centroid has a NaN lane (then the
+/// result depends on the grouping). `s` decodes the common cases, the reader the others (and
+/// reports what is wrong).
 #[inline(always)]
 fn decode_tris(
     s: &impl TriSource,
@@ -1019,8 +1041,13 @@ fn decode_tris(
     first: usize,
     outs: &mut [[u8; TRI_BYTES]],
     refs: &mut [PrimRef],
-) -> Result<usize> {
+) -> Result<(usize, Option<Box4>)> {
     let mut inactive = 0;
+    let mut centroids = Box4::EMPTY;
+    let mut nan = f32x4::ZERO;
+    // Lane 3 of the reference's low half: its sequence number, counted up as a vector.
+    let mut id = bytemuck::cast::<[u32; 4], i32x4>([0, 0, 0, first as u32]);
+    let next = i32x4::new([0, 0, 0, 1]);
     for (j, (out, r)) in outs.iter_mut().zip(refs.iter_mut()).enumerate() {
         let [a, b, c] = match s.get(base + j) {
             Some(v) => v,
@@ -1034,17 +1061,35 @@ fn decode_tris(
         out[..16].copy_from_slice(&bytes(a));
         out[12..28].copy_from_slice(&bytes(b));
         out[24..].copy_from_slice(&bytes(c)[..12]);
-        // The bounds as `Aabb::point` and `grow` make them.
+        // The bounds as `Aabb::point` and `grow` make them, lane 3 the id (low) and whether
+        // it is inactive (high).
         let tri = Box4::triangle(a, b, c);
-        let (mut lo, mut hi) = (tri.lo.to_array(), tri.hi.to_array());
+        let (lo, hi) = (tri.lo & XYZ, tri.hi & XYZ);
         let dead = a.as_array()[0].is_nan();
-        inactive += dead as usize;
-        lo[3] = f32::from_bits((first + j) as u32);
-        hi[3] = f32::from_bits(dead as u32);
-        *r = bytemuck::cast([lo, hi]);
+        let mark = if dead { DEAD } else { f32x4::ZERO };
+        *r = bytemuck::cast([lo | bytemuck::cast::<i32x4, f32x4>(id), hi | mark]);
+        id += next;
+        if dead {
+            inactive += 1;
+        } else {
+            let c = lo + hi;
+            centroids = centroids.union(Box4 { lo: c, hi: c });
+            nan |= c.is_nan();
+        }
     }
-    Ok(inactive)
+    let clean = nan.to_bitmask() == 0;
+    Ok((inactive, clean.then_some(centroids)))
 }
+
+/// Keeps lanes 0..3.
+const XYZ: f32x4 = f32x4::new([
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    f32::from_bits(!0),
+    0.0,
+]);
+/// Lane 3 of an inactive reference's high half (`pad = 1`).
+const DEAD: f32x4 = f32x4::new([0.0, 0.0, 0.0, f32::from_bits(1)]);
 
 fn internal(what: &str) -> Error {
     Error::NotSupported(format!("internal: {what}"))
