@@ -167,12 +167,15 @@ impl StoredPrim for [f32; 9] {
     fn leaf_box(prims: &[[f32; 9]]) -> Lanes {
         let mut g = Box4::EMPTY;
         for f in prims {
-            grow_triangle(
-                &mut g,
-                [f[0], f[1], f[2]],
-                [f[3], f[4], f[5]],
-                [f[6], f[7], f[8]],
-            );
+            // Each vertex from one 16-byte load (a box's lane 3 is unspecified, so the
+            // neighbouring float may fill it): the same lanes 0-2, so the same bits as
+            // `grow_triangle`.
+            let bytes: &[u8; 36] = bytemuck::cast_ref(f);
+            let four = |at: usize| bytemuck::pod_read_unaligned::<[f32; 4]>(&bytes[at..at + 16]);
+            let a = f32x4::new(four(0));
+            let b = f32x4::new(four(12));
+            let c = f32x4::new([f[6], f[7], f[8], f[8]]);
+            g.grow(&Box4::triangle(a, b, c));
         }
         lanes(g)
     }
@@ -204,6 +207,8 @@ fn triangle_box(v: &[f32; 9]) -> Aabb {
 /// valid, active primitives: the caller gives up and the general path reports what is wrong.
 trait Source: Sync {
     type Prim: StoredPrim;
+    /// Whether [`Self::leaf`] reads the leaf's ids (the walk then hands them over).
+    const READS_IDS: bool = true;
     /// Primitive `id`'s stored form.
     fn get(&self, id: u32) -> Option<Self::Prim>;
 
@@ -540,6 +545,7 @@ struct Written;
 
 impl Source for Written {
     type Prim = [f32; 9];
+    const READS_IDS: bool = false;
     /// (Unused: `decode` leaves the stored triangles as they are.)
     fn get(&self, _: u32) -> Option<[f32; 9]> {
         None
@@ -746,16 +752,17 @@ impl<P: StoredPrim> Tree<'_, P> {
             node: node_base + 1,
             prim: prim_base,
         };
+        let node_end = node_base + nodes.len();
         let mut w = Walk {
             src,
             ids,
             nodes,
             prims,
             node_base,
-            prim_base,
         };
         let b = to_aabb(w.node(node_base, &mut at, 1)?);
-        (at.node == node_base + w.nodes.len() && at.prim == prim_base + w.prims.len()).then_some(b)
+        // (Each leaf took its primitives off the front of `prims`.)
+        (at.node == node_end && w.prims.is_empty()).then_some(b)
     }
 
     /// Splits the root's used slots into tasks (an inner child's subtree, or a leaf), refits
@@ -876,15 +883,14 @@ fn leftmost_prim(nodes: &[Node], base: usize, mut c: usize) -> Option<usize> {
     None
 }
 
-/// A sequential walk over a subtree: `nodes` and `prims` (with their `ids`) start at global
-/// `node_base` and `prim_base`.
+/// A sequential walk over a subtree: `nodes` start at global `node_base`; `prims` (with their
+/// `ids`) are the primitives not yet reached, from global `at.prim` on.
 struct Walk<'w, 't, S: Source> {
     src: &'w S,
     ids: &'t [u32],
     nodes: &'t mut [Node],
     prims: &'t mut [S::Prim],
     node_base: usize,
-    prim_base: usize,
 }
 
 impl<S: Source> Walk<'_, '_, S> {
@@ -912,10 +918,17 @@ impl<S: Source> Walk<'_, '_, S> {
                 if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
                     return None;
                 }
-                let l = at.prim - self.prim_base;
                 at.prim += n;
-                self.src
-                    .leaf(self.ids.get(l..l + n)?, self.prims.get_mut(l..l + n)?)?
+                let (prims, rest) = std::mem::take(&mut self.prims).split_at_mut_checked(n)?;
+                self.prims = rest;
+                let ids = if S::READS_IDS {
+                    let (ids, rest) = self.ids.split_at_checked(n)?;
+                    self.ids = rest;
+                    ids
+                } else {
+                    &[]
+                };
+                self.src.leaf(ids, prims)?
             } else {
                 let c = c as usize;
                 if c != at.node {
