@@ -907,7 +907,6 @@ impl<S: Source> Walk<'_, '_, S> {
             (n.child, n.count)
         };
         let mut total = EMPTY_LANES;
-        let mut boxes = [EMPTY_LANES; WIDTH];
         for k in 0..WIDTH {
             let c = child[k];
             if c == EMPTY_CHILD {
@@ -937,37 +936,11 @@ impl<S: Source> Walk<'_, '_, S> {
                 at.node += 1;
                 self.node(c, at, depth + 1)?
             };
-            boxes[k] = b;
+            // (Stored as soon as known: one node's boxes are a few cache lines that stay in
+            // L1 while its subtrees are walked.)
+            self.nodes.get_mut(li)?.set_bounds(k, &to_aabb(b));
             // Aabb::union, in slot order.
             total = (min4(total.0, b.0), max4(total.1, b.1));
-        }
-        let node = self.nodes.get_mut(li)?;
-        if child.contains(&EMPTY_CHILD) {
-            for (k, b) in boxes.iter().enumerate() {
-                if child[k] != EMPTY_CHILD {
-                    node.set_bounds(k, &to_aabb(*b));
-                }
-            }
-        } else {
-            // A full node (every inner node the encoder writes): the same values, transposed
-            // four children at a time instead of stored one by one.
-            for half in 0..WIDTH / 4 {
-                let four = |corner: fn(&Lanes) -> [f32; 4]| {
-                    f32x4::transpose(std::array::from_fn(|j| {
-                        f32x4::new(corner(&boxes[4 * half + j]))
-                    }))
-                    .map(|v| v.to_array())
-                };
-                let [lx, ly, lz, _] = four(|b| b.0);
-                let [hx, hy, hz, _] = four(|b| b.1);
-                let at = 4 * half..4 * half + 4;
-                node.lo_x[at.clone()].copy_from_slice(&lx);
-                node.lo_y[at.clone()].copy_from_slice(&ly);
-                node.lo_z[at.clone()].copy_from_slice(&lz);
-                node.hi_x[at.clone()].copy_from_slice(&hx);
-                node.hi_y[at.clone()].copy_from_slice(&hy);
-                node.hi_z[at].copy_from_slice(&hz);
-            }
         }
         Some(total)
     }
