@@ -394,25 +394,25 @@ impl<I: Indices, V: Vertices> Source for TriF32<I, V> {
         ok.then_some(f)
     }
 
-    /// Decodes and computes the box in one loop, every check folded into one flag.
+    /// Decodes and computes the box in one loop; gives up at the first invalid triangle.
     #[inline(always)]
     fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Lanes> {
         // (A copy, so that the compiler keeps the fields in registers.)
         let d = *self;
-        let mut ok = true;
         let mut bounds = Box4::EMPTY;
         for (o, &id) in out.iter_mut().zip(ids) {
-            let v = d.vertex_indices(id);
-            let (a, b, c) = (
-                d.verts.vertex(v[0]),
-                d.verts.vertex(v[1]),
-                d.verts.vertex(v[2]),
-            );
-            ok &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
+            let t = d.index.triple(id.wrapping_sub(d.first) as usize)?;
+            let fv = d.first_vertex;
+            let a = d.verts.get(t[0] + fv)?;
+            let b = d.verts.get(t[1] + fv)?;
+            let c = d.verts.get(t[2] + fv)?;
+            if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
+                return None;
+            }
             *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
             grow_triangle(&mut bounds, a, b, c);
         }
-        ok.then_some(lanes(bounds))
+        Some(lanes(bounds))
     }
 }
 
