@@ -294,7 +294,7 @@ impl<const N: usize> IndexRecords<'_, N> {
     }
 }
 
-/// A triangle geometry's `R32G32B32_SFLOAT` vertices 0 to maxVertex.
+/// A triangle geometry's `R32G32B32_SFLOAT` vertices firstVertex to maxVertex, numbered from 0.
 trait Vertices: Sync + Copy {
     /// Vertex `v`; `None` past maxVertex.
     fn get(&self, v: usize) -> Option<[f32; 3]>;
@@ -306,7 +306,7 @@ trait Vertices: Sync + Copy {
     }
 }
 
-/// Tightly packed (stride 12): exactly maxVertex + 1 records.
+/// Tightly packed (stride 12): exactly maxVertex + 1 - firstVertex records.
 #[derive(Clone, Copy)]
 struct Packed<'a>(&'a [[u8; 12]]);
 
@@ -345,27 +345,23 @@ impl Vertices for Strided<'_> {
 }
 
 /// One `R32G32B32_SFLOAT` triangle geometry without a transform; the per-geometry checks are
-/// done once, up front.
+/// done once, up front. `verts` starts at vertex `firstVertex`, so index values need no
+/// addition.
 #[derive(Clone, Copy)]
 struct TriF32<I, V> {
     index: I,
     verts: V,
-    first_vertex: usize,
     /// The geometry's first primitive sequence number.
     first: u32,
 }
 
 impl<I: Indices, V: Vertices> TriF32<I, V> {
-    /// The vertex indices (`firstVertex` added) of triangle `id`; out of range (so that
+    /// The vertex indices (into `verts`) of triangle `id`; out of range (so that
     /// [`Self::triangle`] finds it inactive) past the geometry's range.
     #[inline(always)]
     fn vertex_indices(&self, id: u32) -> [usize; 3] {
         let p = id.wrapping_sub(self.first) as usize;
-        let fv = self.first_vertex;
-        match self.index.triple(p) {
-            Some(t) => [t[0] + fv, t[1] + fv, t[2] + fv],
-            None => [usize::MAX; 3],
-        }
+        self.index.triple(p).unwrap_or([usize::MAX; 3])
     }
 
     /// The stored form of the triangle with vertices `v`, and whether it is valid and active
@@ -402,10 +398,9 @@ impl<I: Indices, V: Vertices> Source for TriF32<I, V> {
         let mut bounds = Box4::EMPTY;
         for (o, &id) in out.iter_mut().zip(ids) {
             let t = d.index.triple(id.wrapping_sub(d.first) as usize)?;
-            let fv = d.first_vertex;
-            let a = d.verts.get(t[0] + fv)?;
-            let b = d.verts.get(t[1] + fv)?;
-            let c = d.verts.get(t[2] + fv)?;
+            let a = d.verts.get(t[0])?;
+            let b = d.verts.get(t[1])?;
+            let c = d.verts.get(t[2])?;
             if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
                 return None;
             }
@@ -461,34 +456,43 @@ impl<'a> AnyTri<'a> {
         if !(verts_ok && index_ok) || l.transform.is_some() {
             return AnyTri::Reader(t, first);
         }
-        let strided = Strided {
-            data: l.vertex_data,
-            stride: l.vertex_stride,
-            last: l.max_vertex,
+        // The vertices from firstVertex on (vertex `firstVertex + i` is `i` here, so no index
+        // needs an addition); none when firstVertex is past maxVertex.
+        let fv = l.first_vertex;
+        let stride = l.vertex_stride;
+        let strided = match l.max_vertex.checked_sub(fv) {
+            // (`fv * stride` is within the buffer: `max_vertex * stride + 12` is.)
+            Some(last) => Strided {
+                data: &l.vertex_data[fv * stride..],
+                stride,
+                last,
+            },
+            None => Strided {
+                data: &[],
+                stride,
+                last: 0,
+            },
         };
         let packed = || {
-            Packed(bytemuck::cast_slice(
-                &l.vertex_data[..12 * (l.max_vertex + 1)],
-            ))
+            let all: &[[u8; 12]] = bytemuck::cast_slice(&l.vertex_data[..12 * (l.max_vertex + 1)]);
+            Packed(&all[fv.min(all.len())..])
         };
-        let fv = l.first_vertex;
-        fn tri<I, V>(index: I, verts: V, first_vertex: usize, first: u32) -> TriF32<I, V> {
+        fn tri<I, V>(index: I, verts: V, first: u32) -> TriF32<I, V> {
             TriF32 {
                 index,
                 verts,
-                first_vertex,
                 first,
             }
         }
         let i2 = || IndexRecords::<6>(bytemuck::cast_slice(&l.index_data[..6 * n]));
         let i4 = || IndexRecords::<12>(bytemuck::cast_slice(&l.index_data[..12 * n]));
         match (l.index_size, l.vertex_stride == 12) {
-            (0, false) => AnyTri::I0(tri(NoIndices(n), strided, fv, first)),
-            (2, false) => AnyTri::I2(tri(i2(), strided, fv, first)),
-            (4, false) => AnyTri::I4(tri(i4(), strided, fv, first)),
-            (0, true) => AnyTri::I0P(tri(NoIndices(n), packed(), fv, first)),
-            (2, true) => AnyTri::I2P(tri(i2(), packed(), fv, first)),
-            (4, true) => AnyTri::I4P(tri(i4(), packed(), fv, first)),
+            (0, false) => AnyTri::I0(tri(NoIndices(n), strided, first)),
+            (2, false) => AnyTri::I2(tri(i2(), strided, first)),
+            (4, false) => AnyTri::I4(tri(i4(), strided, first)),
+            (0, true) => AnyTri::I0P(tri(NoIndices(n), packed(), first)),
+            (2, true) => AnyTri::I2P(tri(i2(), packed(), first)),
+            (4, true) => AnyTri::I4P(tri(i4(), packed(), first)),
             _ => AnyTri::Reader(t, first),
         }
     }
@@ -688,12 +692,11 @@ fn in_primitive_order<I: Indices, V: Vertices>(
     let mut active = true;
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
-    let fv = d.first_vertex;
     for (&s, t) in slot.iter().zip(d.index.triples()) {
         if s != NONE {
-            let a = d.verts.get(t[0] + fv)?;
-            let b = d.verts.get(t[1] + fv)?;
-            let c = d.verts.get(t[2] + fv)?;
+            let a = d.verts.get(t[0])?;
+            let b = d.verts.get(t[1])?;
+            let c = d.verts.get(t[2])?;
             active &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
             *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
             written += 1;
@@ -1366,6 +1369,62 @@ mod tests {
                 PrimKind::Triangles,
             )
             .unwrap();
+        }
+    }
+
+    #[test]
+    fn a_first_vertex_offsets_every_index() {
+        let mut r = Rng(13);
+        for (index, stride) in [
+            (vk::IndexType::UINT32, 12),
+            (vk::IndexType::UINT16, 16),
+            (vk::IndexType::NONE_KHR, 12),
+            (vk::IndexType::NONE_KHR, 20),
+        ] {
+            let fv = 7;
+            let mut t = Tris::new(&mut r, 3000, stride, index);
+            // firstVertex more vertices at the end, so that every index plus it is in range.
+            for _ in 0..fv * stride {
+                t.verts.push(0);
+            }
+            t.max_vertex += fv as u32;
+            for v in t.max_vertex as usize + 1 - fv..=t.max_vertex as usize {
+                let c = [r.f(), r.f(), r.f()].map(|x| x * 50.0);
+                t.vertex_mut(v).copy_from_slice(bytemuck::cast_slice(&c));
+            }
+            let ranges: Vec<BuildRangeInfo> = tri_ranges(&[&t])
+                .into_iter()
+                .map(|r| BuildRangeInfo {
+                    first_vertex: fv as u32,
+                    ..r
+                })
+                .collect();
+            let old = t.clone();
+            t.jiggle(&mut r);
+            check(
+                &[old.geometry()],
+                &[t.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap();
+            // One index past maxVertex once firstVertex is added (without indices, the range
+            // check up front reports it).
+            let mut bad = t.clone();
+            let Some((ty, idx)) = &mut bad.index else {
+                continue;
+            };
+            let size = if *ty == vk::IndexType::UINT16 { 2 } else { 4 };
+            let past = (t.max_vertex + 1 - fv as u32).to_le_bytes();
+            idx[3 * size * 100..3 * size * 100 + size].copy_from_slice(&past[..size]);
+            let e = check(
+                &[old.geometry()],
+                &[bad.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap_err();
+            assert!(e.contains("maxVertex"), "{e}");
         }
     }
 
