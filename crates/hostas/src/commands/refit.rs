@@ -689,7 +689,6 @@ fn in_primitive_order<I: Indices, V: Vertices>(
     }
     // Distinct ids fill as many slots as there are ids.
     let mut written = 0;
-    let mut active = true;
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
     for (&s, t) in slot.iter().zip(d.index.triples()) {
@@ -697,12 +696,14 @@ fn in_primitive_order<I: Indices, V: Vertices>(
             let a = d.verts.get(t[0])?;
             let b = d.verts.get(t[1])?;
             let c = d.verts.get(t[2])?;
-            active &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
+            if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
+                return None;
+            }
             *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
             written += 1;
         }
     }
-    (active && written == ids.len()).then_some(())
+    (written == ids.len()).then_some(())
 }
 
 /// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
