@@ -7,7 +7,8 @@
 //! `REFIT_FLAGS=fast-trace|fast-build|low-memory`), then times REPS updates, alternating
 //! between moved and original vertices, and prints the median wall time and the mean of the
 //! calling thread's CPU time (which leaves out waiting for a core). With REPS = 0 it only builds (to
-//! subtract the build's instruction count under `perf stat`).
+//! subtract the build's instruction count under `perf stat`). With `REFIT_HASH` set it also
+//! prints a hash of the structure's bytes after the updates.
 
 use hostas::{Device, vk};
 use std::time::Instant;
@@ -263,6 +264,14 @@ fn main() {
         refit_once(&device, info, &range);
         times.push(t.elapsed().as_secs_f64());
         cpu += cpu_ns() - c;
+    }
+    if std::env::var_os("REFIT_HASH").is_some() {
+        // The structure's bytes after the updates, for byte-identity checks across versions.
+        use std::hash::{Hash, Hasher};
+        let bytes = device.serialize(blas).unwrap();
+        let mut hasher = std::collections::hash_map::DefaultHasher::new();
+        bytes.hash(&mut hasher);
+        println!("{scene}: {reps} updates, hash {:016x}", hasher.finish());
     }
     if reps == 0 {
         return;

@@ -166,13 +166,20 @@ impl StoredPrim for [f32; 9] {
     #[inline(always)]
     fn leaf_box(prims: &[[f32; 9]]) -> Lanes {
         let mut g = Box4::EMPTY;
-        for f in prims {
-            grow_triangle(
-                &mut g,
-                [f[0], f[1], f[2]],
-                [f[3], f[4], f[5]],
-                [f[6], f[7], f[8]],
-            );
+        let mut rest = prims;
+        // (Not `for f in prims`: that computes a trip count, a division by 36, for each
+        // leaf of a few triangles.)
+        while let Some((f, tail)) = rest.split_first() {
+            rest = tail;
+            // Each vertex from one 16-byte load (a box's lane 3 is unspecified, so the
+            // neighbouring float may fill it): the same lanes 0-2, so the same bits as
+            // `grow_triangle`.
+            let bytes: &[u8; 36] = bytemuck::cast_ref(f);
+            let four = |at: usize| bytemuck::pod_read_unaligned::<[f32; 4]>(&bytes[at..at + 16]);
+            let a = f32x4::new(four(0));
+            let b = f32x4::new(four(12));
+            let c = f32x4::new([f[6], f[7], f[8], f[8]]);
+            g.grow(&Box4::triangle(a, b, c));
         }
         lanes(g)
     }
@@ -204,6 +211,8 @@ fn triangle_box(v: &[f32; 9]) -> Aabb {
 /// valid, active primitives: the caller gives up and the general path reports what is wrong.
 trait Source: Sync {
     type Prim: StoredPrim;
+    /// Whether [`Self::leaf`] reads the leaf's ids (the walk then hands them over).
+    const READS_IDS: bool = true;
     /// Primitive `id`'s stored form.
     fn get(&self, id: u32) -> Option<Self::Prim>;
 
@@ -285,7 +294,7 @@ impl<const N: usize> IndexRecords<'_, N> {
     }
 }
 
-/// A triangle geometry's `R32G32B32_SFLOAT` vertices 0 to maxVertex.
+/// A triangle geometry's `R32G32B32_SFLOAT` vertices firstVertex to maxVertex, numbered from 0.
 trait Vertices: Sync + Copy {
     /// Vertex `v`; `None` past maxVertex.
     fn get(&self, v: usize) -> Option<[f32; 3]>;
@@ -297,7 +306,7 @@ trait Vertices: Sync + Copy {
     }
 }
 
-/// Tightly packed (stride 12): exactly maxVertex + 1 records.
+/// Tightly packed (stride 12): exactly maxVertex + 1 - firstVertex records.
 #[derive(Clone, Copy)]
 struct Packed<'a>(&'a [[u8; 12]]);
 
@@ -336,27 +345,23 @@ impl Vertices for Strided<'_> {
 }
 
 /// One `R32G32B32_SFLOAT` triangle geometry without a transform; the per-geometry checks are
-/// done once, up front.
+/// done once, up front. `verts` starts at vertex `firstVertex`, so index values need no
+/// addition.
 #[derive(Clone, Copy)]
 struct TriF32<I, V> {
     index: I,
     verts: V,
-    first_vertex: usize,
     /// The geometry's first primitive sequence number.
     first: u32,
 }
 
 impl<I: Indices, V: Vertices> TriF32<I, V> {
-    /// The vertex indices (`firstVertex` added) of triangle `id`; out of range (so that
+    /// The vertex indices (into `verts`) of triangle `id`; out of range (so that
     /// [`Self::triangle`] finds it inactive) past the geometry's range.
     #[inline(always)]
     fn vertex_indices(&self, id: u32) -> [usize; 3] {
         let p = id.wrapping_sub(self.first) as usize;
-        let fv = self.first_vertex;
-        match self.index.triple(p) {
-            Some(t) => [t[0] + fv, t[1] + fv, t[2] + fv],
-            None => [usize::MAX; 3],
-        }
+        self.index.triple(p).unwrap_or([usize::MAX; 3])
     }
 
     /// The stored form of the triangle with vertices `v`, and whether it is valid and active
@@ -385,25 +390,24 @@ impl<I: Indices, V: Vertices> Source for TriF32<I, V> {
         ok.then_some(f)
     }
 
-    /// Decodes and computes the box in one loop, every check folded into one flag.
+    /// Decodes and computes the box in one loop; gives up at the first invalid triangle.
     #[inline(always)]
     fn leaf(&self, ids: &[u32], out: &mut [[f32; 9]]) -> Option<Lanes> {
         // (A copy, so that the compiler keeps the fields in registers.)
         let d = *self;
-        let mut ok = true;
         let mut bounds = Box4::EMPTY;
         for (o, &id) in out.iter_mut().zip(ids) {
-            let v = d.vertex_indices(id);
-            let (a, b, c) = (
-                d.verts.vertex(v[0]),
-                d.verts.vertex(v[1]),
-                d.verts.vertex(v[2]),
-            );
-            ok &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
+            let t = d.index.triple(id.wrapping_sub(d.first) as usize)?;
+            let a = d.verts.get(t[0])?;
+            let b = d.verts.get(t[1])?;
+            let c = d.verts.get(t[2])?;
+            if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
+                return None;
+            }
             *o = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
             grow_triangle(&mut bounds, a, b, c);
         }
-        ok.then_some(lanes(bounds))
+        Some(lanes(bounds))
     }
 }
 
@@ -452,34 +456,43 @@ impl<'a> AnyTri<'a> {
         if !(verts_ok && index_ok) || l.transform.is_some() {
             return AnyTri::Reader(t, first);
         }
-        let strided = Strided {
-            data: l.vertex_data,
-            stride: l.vertex_stride,
-            last: l.max_vertex,
+        // The vertices from firstVertex on (vertex `firstVertex + i` is `i` here, so no index
+        // needs an addition); none when firstVertex is past maxVertex.
+        let fv = l.first_vertex;
+        let stride = l.vertex_stride;
+        let strided = match l.max_vertex.checked_sub(fv) {
+            // (`fv * stride` is within the buffer: `max_vertex * stride + 12` is.)
+            Some(last) => Strided {
+                data: &l.vertex_data[fv * stride..],
+                stride,
+                last,
+            },
+            None => Strided {
+                data: &[],
+                stride,
+                last: 0,
+            },
         };
         let packed = || {
-            Packed(bytemuck::cast_slice(
-                &l.vertex_data[..12 * (l.max_vertex + 1)],
-            ))
+            let all: &[[u8; 12]] = bytemuck::cast_slice(&l.vertex_data[..12 * (l.max_vertex + 1)]);
+            Packed(&all[fv.min(all.len())..])
         };
-        let fv = l.first_vertex;
-        fn tri<I, V>(index: I, verts: V, first_vertex: usize, first: u32) -> TriF32<I, V> {
+        fn tri<I, V>(index: I, verts: V, first: u32) -> TriF32<I, V> {
             TriF32 {
                 index,
                 verts,
-                first_vertex,
                 first,
             }
         }
         let i2 = || IndexRecords::<6>(bytemuck::cast_slice(&l.index_data[..6 * n]));
         let i4 = || IndexRecords::<12>(bytemuck::cast_slice(&l.index_data[..12 * n]));
         match (l.index_size, l.vertex_stride == 12) {
-            (0, false) => AnyTri::I0(tri(NoIndices(n), strided, fv, first)),
-            (2, false) => AnyTri::I2(tri(i2(), strided, fv, first)),
-            (4, false) => AnyTri::I4(tri(i4(), strided, fv, first)),
-            (0, true) => AnyTri::I0P(tri(NoIndices(n), packed(), fv, first)),
-            (2, true) => AnyTri::I2P(tri(i2(), packed(), fv, first)),
-            (4, true) => AnyTri::I4P(tri(i4(), packed(), fv, first)),
+            (0, false) => AnyTri::I0(tri(NoIndices(n), strided, first)),
+            (2, false) => AnyTri::I2(tri(i2(), strided, first)),
+            (4, false) => AnyTri::I4(tri(i4(), strided, first)),
+            (0, true) => AnyTri::I0P(tri(NoIndices(n), packed(), first)),
+            (2, true) => AnyTri::I2P(tri(i2(), packed(), first)),
+            (4, true) => AnyTri::I4P(tri(i4(), packed(), first)),
             _ => AnyTri::Reader(t, first),
         }
     }
@@ -540,6 +553,7 @@ struct Written;
 
 impl Source for Written {
     type Prim = [f32; 9];
+    const READS_IDS: bool = false;
     /// (Unused: `decode` leaves the stored triangles as they are.)
     fn get(&self, _: u32) -> Option<[f32; 9]> {
         None
@@ -675,21 +689,21 @@ fn in_primitive_order<I: Indices, V: Vertices>(
     }
     // Distinct ids fill as many slots as there are ids.
     let mut written = 0;
-    let mut active = true;
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
-    let fv = d.first_vertex;
     for (&s, t) in slot.iter().zip(d.index.triples()) {
         if s != NONE {
-            let a = d.verts.get(t[0] + fv)?;
-            let b = d.verts.get(t[1] + fv)?;
-            let c = d.verts.get(t[2] + fv)?;
-            active &= !(a[0].is_nan() | b[0].is_nan() | c[0].is_nan());
+            let a = d.verts.get(t[0])?;
+            let b = d.verts.get(t[1])?;
+            let c = d.verts.get(t[2])?;
+            if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
+                return None;
+            }
             *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
             written += 1;
         }
     }
-    (active && written == ids.len()).then_some(())
+    (written == ids.len()).then_some(())
 }
 
 /// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
@@ -746,16 +760,17 @@ impl<P: StoredPrim> Tree<'_, P> {
             node: node_base + 1,
             prim: prim_base,
         };
+        let node_end = node_base + nodes.len();
         let mut w = Walk {
             src,
             ids,
             nodes,
             prims,
             node_base,
-            prim_base,
         };
         let b = to_aabb(w.node(node_base, &mut at, 1)?);
-        (at.node == node_base + w.nodes.len() && at.prim == prim_base + w.prims.len()).then_some(b)
+        // (Each leaf took its primitives off the front of `prims`.)
+        (at.node == node_end && w.prims.is_empty()).then_some(b)
     }
 
     /// Splits the root's used slots into tasks (an inner child's subtree, or a leaf), refits
@@ -876,15 +891,14 @@ fn leftmost_prim(nodes: &[Node], base: usize, mut c: usize) -> Option<usize> {
     None
 }
 
-/// A sequential walk over a subtree: `nodes` and `prims` (with their `ids`) start at global
-/// `node_base` and `prim_base`.
+/// A sequential walk over a subtree: `nodes` start at global `node_base`; `prims` (with their
+/// `ids`) are the primitives not yet reached, from global `at.prim` on.
 struct Walk<'w, 't, S: Source> {
     src: &'w S,
     ids: &'t [u32],
     nodes: &'t mut [Node],
     prims: &'t mut [S::Prim],
     node_base: usize,
-    prim_base: usize,
 }
 
 impl<S: Source> Walk<'_, '_, S> {
@@ -901,7 +915,6 @@ impl<S: Source> Walk<'_, '_, S> {
             (n.child, n.count)
         };
         let mut total = EMPTY_LANES;
-        let mut boxes = [EMPTY_LANES; WIDTH];
         for k in 0..WIDTH {
             let c = child[k];
             if c == EMPTY_CHILD {
@@ -912,10 +925,17 @@ impl<S: Source> Walk<'_, '_, S> {
                 if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
                     return None;
                 }
-                let l = at.prim - self.prim_base;
                 at.prim += n;
-                self.src
-                    .leaf(self.ids.get(l..l + n)?, self.prims.get_mut(l..l + n)?)?
+                let (prims, rest) = std::mem::take(&mut self.prims).split_at_mut_checked(n)?;
+                self.prims = rest;
+                let ids = if S::READS_IDS {
+                    let (ids, rest) = self.ids.split_at_checked(n)?;
+                    self.ids = rest;
+                    ids
+                } else {
+                    &[]
+                };
+                self.src.leaf(ids, prims)?
             } else {
                 let c = c as usize;
                 if c != at.node {
@@ -924,37 +944,11 @@ impl<S: Source> Walk<'_, '_, S> {
                 at.node += 1;
                 self.node(c, at, depth + 1)?
             };
-            boxes[k] = b;
+            // (Stored as soon as known: one node's boxes are a few cache lines that stay in
+            // L1 while its subtrees are walked.)
+            self.nodes.get_mut(li)?.set_bounds(k, &to_aabb(b));
             // Aabb::union, in slot order.
             total = (min4(total.0, b.0), max4(total.1, b.1));
-        }
-        let node = self.nodes.get_mut(li)?;
-        if child.contains(&EMPTY_CHILD) {
-            for (k, b) in boxes.iter().enumerate() {
-                if child[k] != EMPTY_CHILD {
-                    node.set_bounds(k, &to_aabb(*b));
-                }
-            }
-        } else {
-            // A full node (every inner node the encoder writes): the same values, transposed
-            // four children at a time instead of stored one by one.
-            for half in 0..WIDTH / 4 {
-                let four = |corner: fn(&Lanes) -> [f32; 4]| {
-                    f32x4::transpose(std::array::from_fn(|j| {
-                        f32x4::new(corner(&boxes[4 * half + j]))
-                    }))
-                    .map(|v| v.to_array())
-                };
-                let [lx, ly, lz, _] = four(|b| b.0);
-                let [hx, hy, hz, _] = four(|b| b.1);
-                let at = 4 * half..4 * half + 4;
-                node.lo_x[at.clone()].copy_from_slice(&lx);
-                node.lo_y[at.clone()].copy_from_slice(&ly);
-                node.lo_z[at.clone()].copy_from_slice(&lz);
-                node.hi_x[at.clone()].copy_from_slice(&hx);
-                node.hi_y[at.clone()].copy_from_slice(&hy);
-                node.hi_z[at].copy_from_slice(&hz);
-            }
         }
         Some(total)
     }
@@ -1376,6 +1370,62 @@ mod tests {
                 PrimKind::Triangles,
             )
             .unwrap();
+        }
+    }
+
+    #[test]
+    fn a_first_vertex_offsets_every_index() {
+        let mut r = Rng(13);
+        for (index, stride) in [
+            (vk::IndexType::UINT32, 12),
+            (vk::IndexType::UINT16, 16),
+            (vk::IndexType::NONE_KHR, 12),
+            (vk::IndexType::NONE_KHR, 20),
+        ] {
+            let fv = 7;
+            let mut t = Tris::new(&mut r, 3000, stride, index);
+            // firstVertex more vertices at the end, so that every index plus it is in range.
+            for _ in 0..fv * stride {
+                t.verts.push(0);
+            }
+            t.max_vertex += fv as u32;
+            for v in t.max_vertex as usize + 1 - fv..=t.max_vertex as usize {
+                let c = [r.f(), r.f(), r.f()].map(|x| x * 50.0);
+                t.vertex_mut(v).copy_from_slice(bytemuck::cast_slice(&c));
+            }
+            let ranges: Vec<BuildRangeInfo> = tri_ranges(&[&t])
+                .into_iter()
+                .map(|r| BuildRangeInfo {
+                    first_vertex: fv as u32,
+                    ..r
+                })
+                .collect();
+            let old = t.clone();
+            t.jiggle(&mut r);
+            check(
+                &[old.geometry()],
+                &[t.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap();
+            // One index past maxVertex once firstVertex is added (without indices, the range
+            // check up front reports it).
+            let mut bad = t.clone();
+            let Some((ty, idx)) = &mut bad.index else {
+                continue;
+            };
+            let size = if *ty == vk::IndexType::UINT16 { 2 } else { 4 };
+            let past = (t.max_vertex + 1 - fv as u32).to_le_bytes();
+            idx[3 * size * 100..3 * size * 100 + size].copy_from_slice(&past[..size]);
+            let e = check(
+                &[old.geometry()],
+                &[bad.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap_err();
+            assert!(e.contains("maxVertex"), "{e}");
         }
     }
 
