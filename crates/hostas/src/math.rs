@@ -290,3 +290,19 @@ impl Affine {
         out
     }
 }
+
+/// Asks the caches for the line holding `x`, about to be written: a hint for scattered writes
+/// whose addresses are known well ahead (no effect on any result).
+#[inline(always)]
+pub fn prefetch_for_write<T>(x: &T) {
+    #[cfg(all(
+        any(target_arch = "x86", target_arch = "x86_64"),
+        target_feature = "sse"
+    ))]
+    safe_arch::prefetch_et0(x);
+    #[cfg(not(all(
+        any(target_arch = "x86", target_arch = "x86_64"),
+        target_feature = "sse"
+    )))]
+    let _ = x;
+}

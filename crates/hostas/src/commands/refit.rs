@@ -24,7 +24,7 @@ use crate::layout::{
     EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
     MAX_LEAF_SIZE, NODE_SIZE, Node, PrimKind, WIDTH,
 };
-use crate::math::{Aabb, Box4, fmax4, fmin4};
+use crate::math::{Aabb, Box4, fmax4, fmin4, prefetch_for_write};
 use rayon::prelude::*;
 use wide::f32x4;
 
@@ -652,9 +652,17 @@ fn refit_triangles<I: Indices, V: Vertices>(
     let skip = scratch.as_ptr().align_offset(4).min(scratch.len());
     let slot_bytes = scratch.get_mut(skip..skip + 4 * d.index.len())?;
     let slot: &mut [u32] = bytemuck::try_cast_slice_mut(slot_bytes).ok()?;
-    in_primitive_order(&d, ids, prims, slot)?;
+    // On the VM: 1M soup +10%, 1M boxes and sphere +25%; the bunny (69k) 10% slower.
+    if prims.len() >= PREFETCH_MIN_PRIMS {
+        in_primitive_order::<I, V, true>(&d, ids, prims, slot)?;
+    } else {
+        in_primitive_order::<I, V, false>(&d, ids, prims, slot)?;
+    }
     Tree { ids, nodes, prims }.refit(&Written)
 }
+
+/// From this many stored triangles (9 MiB of them) the pass in primitive order prefetches.
+const PREFETCH_MIN_PRIMS: usize = 1 << 18;
 
 /// Whether consecutive stored primitives are mostly far apart in primitive order (sampled).
 fn scattered(ids: &[u32]) -> bool {
@@ -676,22 +684,42 @@ fn scattered(ids: &[u32]) -> bool {
 /// Rewrites the stored triangles (`prims`, ids `ids`) in primitive order: the application's
 /// buffers are read in sequence, the stored ones written at random. `None` if any triangle is
 /// not valid or the ids are not distinct (the general path then takes over).
-fn in_primitive_order<I: Indices, V: Vertices>(
+fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     d: &TriF32<I, V>,
     ids: &[u32],
     prims: &mut [[f32; 9]],
     slot: &mut [u32],
 ) -> Option<()> {
     const NONE: u32 = u32::MAX;
+    // Both loops write at random (a soup's leaves are scattered over primitive order). With
+    // `AHEAD` (structures larger than the caches), the lines they will write are requested
+    // this many iterations ahead, so that the misses overlap instead of following one another.
+    const SLOTS_AHEAD: usize = 32;
+    const PRIMS_AHEAD: usize = 16;
     slot.fill(NONE);
     for (s, &id) in ids.iter().enumerate() {
+        if AHEAD {
+            if let Some(&ahead) = ids.get(s + SLOTS_AHEAD) {
+                if let Some(x) = slot.get(ahead.wrapping_sub(d.first) as usize) {
+                    prefetch_for_write(x);
+                }
+            }
+        }
         *slot.get_mut(id.wrapping_sub(d.first) as usize)? = s as u32;
     }
     // Distinct ids fill as many slots as there are ids.
     let mut written = 0;
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
-    for (&s, t) in slot.iter().zip(d.index.triples()) {
+    for (p, (&s, t)) in slot.iter().zip(d.index.triples()).enumerate() {
+        if AHEAD {
+            if let Some(x) = slot
+                .get(p + PRIMS_AHEAD)
+                .and_then(|&a| prims.get(a as usize))
+            {
+                prefetch_for_write(x);
+            }
+        }
         if s != NONE {
             let a = d.verts.get(t[0])?;
             let b = d.verts.get(t[1])?;
