@@ -306,3 +306,18 @@ pub fn prefetch_for_write<T>(x: &T) {
     )))]
     let _ = x;
 }
+
+/// Asks the caches for the line holding `x`, about to be read (a hint; no effect on results).
+#[inline(always)]
+pub fn prefetch<T>(x: &T) {
+    #[cfg(all(
+        any(target_arch = "x86", target_arch = "x86_64"),
+        target_feature = "sse"
+    ))]
+    safe_arch::prefetch_t0(x);
+    #[cfg(not(all(
+        any(target_arch = "x86", target_arch = "x86_64"),
+        target_feature = "sse"
+    )))]
+    let _ = x;
+}

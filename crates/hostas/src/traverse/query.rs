@@ -328,6 +328,9 @@ pub(super) fn descend(
     t_max: f32,
 ) -> Option<Entry> {
     let node = nodes.get(index as usize)?;
+    // The children's references are read only once the test has picked them: their line is
+    // requested now, so that its miss overlaps the planes' instead of following them.
+    crate::math::prefetch(&node.child);
     let (mut mask, t) = ray.node(node, t_min, t_max);
     if mask == 0 {
         return None;
@@ -340,6 +343,16 @@ pub(super) fn descend(
     if mask & (mask - 1) == 0 {
         return Some(entry(mask.trailing_zeros() as usize));
     }
+    // A pushed inner node is requested now, so that its misses overlap the rest of the walk.
+    let warm = |e: &Entry| {
+        // (A leaf's reference, with its high bit, is past every node index.)
+        if let Some(n) = nodes.get(e.child as usize) {
+            let r = n.rows();
+            for k in [0, 2, 4, 6] {
+                crate::math::prefetch(&r[k]);
+            }
+        }
+    };
     let start = *sp;
     // Two children (the most common case after one): the farther is pushed, the nearer
     // returned, in the order the insertion sort below would give (on a tie, the later lane
@@ -349,6 +362,7 @@ pub(super) fn descend(
         let e0 = entry(mask.trailing_zeros() as usize);
         let e1 = entry(rest.trailing_zeros() as usize);
         let (far, near) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
+        warm(&far);
         *stack.get_mut(start)? = far;
         *sp = start + 1;
         return Some(near);
@@ -363,6 +377,8 @@ pub(super) fn descend(
         let (a, b) = if e0.t < e1.t { (e1, e0) } else { (e0, e1) };
         let (b, c) = if b.t < e2.t { (e2, b) } else { (b, e2) };
         let (a, b) = if a.t < b.t { (b, a) } else { (a, b) };
+        warm(&a);
+        warm(&b);
         let region = stack.get_mut(start..start + 2)?;
         region[0] = a;
         region[1] = b;
