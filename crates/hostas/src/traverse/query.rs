@@ -299,6 +299,7 @@ impl<'s> Level<'s> {
                 &mut stack.items,
                 &mut sp,
                 self.view.nodes,
+                self.view.triangles,
                 e.child,
                 &self.ray,
                 t_min,
@@ -318,10 +319,12 @@ const _: () = assert!(WIDTH == 8, "the node test is written for f32x8");
 /// Tests the children of node `index`: returns the nearest one the segment reaches, having
 /// pushed the others (farthest deepest), or `None` when it reaches none.
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 pub(super) fn descend(
     stack: &mut [Entry],
     sp: &mut usize,
     nodes: &[Node],
+    triangles: &[[f32; 9]],
     index: u32,
     ray: &BoxRay,
     t_min: f32,
@@ -343,13 +346,23 @@ pub(super) fn descend(
     if mask & (mask - 1) == 0 {
         return Some(entry(mask.trailing_zeros() as usize));
     }
-    // A pushed inner node is requested now, so that its misses overlap the rest of the walk.
+    // A pushed child is requested now, so that its misses overlap the rest of the walk: an
+    // inner node's four lines, or a leaf's first and last triangle.
     let warm = |e: &Entry| {
-        // (A leaf's reference, with its high bit, is past every node index.)
-        if let Some(n) = nodes.get(e.child as usize) {
-            let r = n.rows();
-            for k in [0, 2, 4, 6] {
-                crate::math::prefetch(&r[k]);
+        if e.child & LEAF_BIT == 0 {
+            if let Some(n) = nodes.get(e.child as usize) {
+                let r = n.rows();
+                for k in [0, 2, 4, 6] {
+                    crate::math::prefetch(&r[k]);
+                }
+            }
+        } else {
+            let first = (e.child & !LEAF_BIT) as usize;
+            if let Some(t) = triangles.get(first) {
+                crate::math::prefetch(t);
+            }
+            if let Some(t) = triangles.get(first + (e.count as usize).saturating_sub(1)) {
+                crate::math::prefetch(t);
             }
         }
     };
@@ -392,6 +405,7 @@ pub(super) fn descend(
         let k = mask.trailing_zeros() as usize;
         mask &= mask - 1;
         let e = entry(k);
+        warm(&e);
         // Cannot overflow on a validated view (depth <= MAX_DEPTH); drop rather than panic.
         let Some(region) = stack.get_mut(start..=end) else {
             break;

@@ -181,6 +181,7 @@ impl<'s> Tracer<'s> {
                     stack,
                     &mut sp,
                     tlas.nodes,
+                    &[],
                     cur.child,
                     &world.boxes,
                     ray.t_min,
@@ -393,7 +394,14 @@ fn trace_blas<const P: usize>(
     loop {
         if cur.child & LEAF_BIT == 0 {
             if let Some(next) = descend(
-                stack, &mut sp, view.nodes, cur.child, boxes, ray.t_min, best.t,
+                stack,
+                &mut sp,
+                view.nodes,
+                view.triangles,
+                cur.child,
+                boxes,
+                ray.t_min,
+                best.t,
             ) {
                 cur = next;
                 continue;
