@@ -95,6 +95,8 @@ fn center2(r: &PrimRef) -> f32x4 {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RangeInfo {
     pub bounds: Aabb,
+    /// Empty for the ranges that splits of small ranges make: those are swept, never binned,
+    /// so nothing reads them (the median split finds its own, see [`median_split`]).
     pub centroids: Aabb,
 }
 
@@ -141,6 +143,13 @@ impl RangeInfo {
         RangeInfo {
             bounds: a.bounds.union(&b.bounds),
             centroids: a.centroids.union(&b.centroids),
+        }
+    }
+    /// A small range's info: its bounds only.
+    fn bounded(bounds: &Box8) -> RangeInfo {
+        RangeInfo {
+            bounds: bounds.aabb(),
+            centroids: Aabb::EMPTY,
         }
     }
     pub fn of(refs: &[PrimRef]) -> RangeInfo {
@@ -642,33 +651,44 @@ impl Orders {
 
 /// Exact SAH split of a small range (2 to [`SMALL`] primitives) given its orders: sweep
 /// every position on every axis, then permute the references once, for the winning axis.
-/// Returns the split and the orders of both sides.
+/// Returns the split and the orders of both sides. The sides' infos carry bounds only (see
+/// [`RangeInfo::centroids`]).
 fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
-    let n = refs.len().min(SMALL);
+    // Most swept ranges have 8 or fewer primitives: half-size working arrays for them.
+    if refs.len() <= 8 {
+        sweep::<8>(refs, orders)
+    } else {
+        sweep::<SMALL>(refs, orders)
+    }
+}
+
+/// [`sweep_split`] for ranges of at most `L` primitives (`L` a power of two up to [`SMALL`]).
+fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+    let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
-    let mut boxes = [Box8::EMPTY; SMALL];
+    let mut boxes = [Box8::EMPTY; L];
     for (b, r) in boxes.iter_mut().zip(refs.iter()) {
         *b = Box8::of(r);
     }
     // The three axes are swept side by side: three independent chains of box growth, their
     // areas computed together.
     let o = &orders.0;
-    let mut right_area = [f32x4::ZERO; SMALL];
+    let mut right_area = [f32x4::ZERO; L];
     let mut acc = [Box8::EMPTY; 3];
     for i in (1..n).rev() {
         for k in 0..3 {
-            acc[k].grow(&boxes[o[k][i] as usize & (SMALL - 1)]);
+            acc[k].grow(&boxes[o[k][i] as usize & (L - 1)]);
         }
-        right_area[i & (SMALL - 1)] = half_areas3(&acc);
+        right_area[i & (L - 1)] = half_areas3(&acc);
     }
     let mut acc = [Box8::EMPTY; 3];
     // Per axis, the first position of least cost (a NaN or infinite cost never wins).
     let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::splat((n / 2) as f32));
     for i in 1..n {
         for k in 0..3 {
-            acc[k].grow(&boxes[o[k][i - 1] as usize & (SMALL - 1)]);
+            acc[k].grow(&boxes[o[k][i - 1] as usize & (L - 1)]);
         }
-        let right = right_area[i & (SMALL - 1)];
+        let right = right_area[i & (L - 1)];
         let cost =
             half_areas3(&acc) * f32x4::splat(i as f32) + right * f32x4::splat((n - i) as f32);
         // Selects, not branches: which position wins is data, not pattern.
@@ -687,14 +707,20 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     // No finite cost (NaN bounds): split in the middle, in the current order.
     let identity: [u8; SMALL] = std::array::from_fn(|i| i as u8);
     let perm = orders.0.get(best_axis).unwrap_or(&identity);
-    let mut pos = [0u8; SMALL];
+    let mut pos = [0u8; L];
+    let (mut left, mut right) = (Box8::EMPTY, Box8::EMPTY);
     for (i, (dst, &src)) in refs.iter_mut().zip(&perm[..n]).enumerate() {
-        let b = &boxes[src as usize & (SMALL - 1)];
+        let b = &boxes[src as usize & (L - 1)];
         *dst = b.prim_ref();
-        pos[src as usize & (SMALL - 1)] = i as u8;
+        pos[src as usize & (L - 1)] = i as u8;
+        // Both sides' bounds, grown in the new order (the same bits as from the references).
+        if i < best_mid {
+            left.grow(b);
+        } else {
+            right.grow(b);
+        }
     }
-    let (left, right) = refs.split_at(best_mid);
-    let (left, right) = (Acc::of(left), Acc::of(right));
+    let (left, right) = (RangeInfo::bounded(&left), RangeInfo::bounded(&right));
     // Each side's orders: the range's orders filtered, as positions after the permutation.
     // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
@@ -705,9 +731,9 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
         }
         let (mut li, mut ri) = (0, 0);
         for &o in &orders.0[k][..n] {
-            let p = pos[o as usize & (SMALL - 1)];
-            lo[k][li & (SMALL - 1)] = p;
-            ro[k][ri & (SMALL - 1)] = p.wrapping_sub(mid);
+            let p = pos[o as usize & (L - 1)];
+            lo[k][li & (L - 1)] = p;
+            ro[k][ri & (L - 1)] = p.wrapping_sub(mid);
             li += (p < mid) as usize;
             ri += (p >= mid) as usize;
         }
@@ -725,7 +751,13 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
 /// halves, so it bounds depth and handles coincident centroids.
 fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     let mid = refs.len() / 2;
-    let ext = [0, 1, 2].map(|k| info.centroids.hi[k] - info.centroids.lo[k]);
+    // Small ranges' infos have no centroid bounds.
+    let centroids = if refs.len() <= SMALL {
+        Acc::of(refs).centroids
+    } else {
+        info.centroids
+    };
+    let ext = [0, 1, 2].map(|k| centroids.hi[k] - centroids.lo[k]);
     let axis = (0..3)
         .max_by(|&a, &b| ext[a].total_cmp(&ext[b]))
         .unwrap_or(0);
@@ -759,7 +791,8 @@ fn split(
     }
     if refs.len() == 2 {
         // One way to split two: no orders to sort or sweep.
-        let (l, r) = (Acc::of(&refs[..1]), Acc::of(&refs[1..]));
+        let (l, r) = (Box8::of(&refs[0]), Box8::of(&refs[1]));
+        let (l, r) = (RangeInfo::bounded(&l), RangeInfo::bounded(&r));
         let cost = l.bounds.half_area() + r.bounds.half_area();
         let one = Orders([[0; SMALL]; 3]);
         let s = Split {
