@@ -9,7 +9,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{Node, WIDTH};
 use crate::math::{Aabb, Box4, fmin8};
 use rayon::prelude::*;
-use wide::{f32x4, f32x8};
+use wide::{f32x4, f32x8, i32x4};
 
 pub const MAX_BINS: usize = 32;
 /// Ranges up to this size are split by an exact sweep instead of binning.
@@ -47,15 +47,6 @@ impl Box8 {
         let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(self.0);
         (lo, neg_hi)
     }
-    #[inline(always)]
-    fn half_area(&self) -> f32 {
-        let (lo, neg_hi) = self.halves();
-        // The negated extent (exactly): its products are the extent's.
-        let d = (lo + neg_hi).to_array();
-        // No test for empty boxes: theirs is infinite, and times a count of zero it makes a
-        // NaN cost, which loses every comparison.
-        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
-    }
     /// The doubled centroid (lane 3 is meaningless).
     #[inline(always)]
     fn center2(&self) -> f32x4 {
@@ -72,10 +63,12 @@ impl Box8 {
     }
 }
 
-/// The half areas of three boxes, in lanes 0 to 2 (the same arithmetic as
-/// [`Box8::half_area`], three at a time).
+/// The half areas of three boxes, in lanes 0 to 2: `d0 * d1 + d1 * d2 + d2 * d0` of each
+/// box's extent `d`. No test for empty boxes: theirs is infinite, and times a count of zero it
+/// makes a NaN cost, which loses every comparison.
 #[inline(always)]
 fn half_areas3(b: &[Box8; 3]) -> f32x4 {
+    // The negated extents (exactly): their products are the extents'.
     let d = |b: &Box8| {
         let (lo, neg_hi) = b.halves();
         lo + neg_hi
@@ -334,32 +327,45 @@ impl<const N: usize> Bins<N> {
     /// The best split plane: (axis, first bin of the right side, cost). Planes with an empty
     /// side cost NaN (an empty box's infinite area times a zero count) and never win.
     fn best(&self, binner: &Binner) -> Option<(usize, usize, f32)> {
-        // The three axes side by side (independent chains), each keeping its first plane of
-        // least cost with selects; then the first axis of least cost: the same winner as
-        // sweeping the axes in turn.
-        let mut right_cost = [[0f32; N]; 3];
+        // The three axes side by side in the lanes of one vector (their areas computed
+        // together, see `half_areas3`), each keeping its first plane of least cost with
+        // selects; then the first axis of least cost: the same winner as sweeping the axes in
+        // turn. (Counts are below 2^31: as `i32` they convert to the same floats.)
+        let counts = |i: usize| {
+            i32x4::new([
+                self.counts[0][i] as i32,
+                self.counts[1][i] as i32,
+                self.counts[2][i] as i32,
+                0,
+            ])
+        };
+        let mut right_cost = [f32x4::ZERO; N];
         let mut acc = [Box8::EMPTY; 3];
-        let mut n = [0u32; 3];
+        let mut n = i32x4::ZERO;
         for i in (1..N).rev() {
             for k in 0..3 {
                 acc[k].grow(&self.bounds[k][i]);
-                n[k] += self.counts[k][i];
-                right_cost[k][i] = acc[k].half_area() * n[k] as f32;
             }
+            n += counts(i);
+            right_cost[i] = half_areas3(&acc) * f32x4::from_i32x4(n);
         }
         let mut acc = [Box8::EMPTY; 3];
-        let mut n = [0u32; 3];
-        let mut best = [(f32::INFINITY, 0usize); 3];
+        let mut n = i32x4::ZERO;
+        let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::ZERO);
         for i in 1..N {
             for k in 0..3 {
                 acc[k].grow(&self.bounds[k][i - 1]);
-                n[k] += self.counts[k][i - 1];
-                let cost = acc[k].half_area() * n[k] as f32 + right_cost[k][i];
-                let better = cost < best[k].0;
-                best[k].0 = if better { cost } else { best[k].0 };
-                best[k].1 = if better { i } else { best[k].1 };
             }
+            n += counts(i - 1);
+            let cost = half_areas3(&acc) * f32x4::from_i32x4(n) + right_cost[i];
+            let better = cost.simd_lt(best_cost);
+            best_cost = better.select(cost, best_cost);
+            best_at = better.select(f32x4::splat(i as f32), best_at);
         }
+        let best: [(f32, usize); 3] = {
+            let (c, a) = (best_cost.to_array(), best_at.to_array());
+            std::array::from_fn(|k| (c[k], a[k] as usize))
+        };
         let mut pick: Option<(usize, usize, f32)> = None;
         let mut best_cost = f32::INFINITY;
         for (k, &(cost, i)) in best.iter().enumerate() {
