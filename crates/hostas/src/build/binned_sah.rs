@@ -9,7 +9,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{Node, WIDTH};
 use crate::math::{Aabb, Box4, fmin8};
 use rayon::prelude::*;
-use wide::{f32x4, f32x8, i32x4};
+use wide::{f32x4, f32x8, i32x4, i32x8, u32x4};
 
 pub const MAX_BINS: usize = 32;
 /// Ranges up to this size are split by an exact sweep instead of binning.
@@ -604,13 +604,14 @@ fn binned_split(
     }
 }
 
-/// A key that orders floats like `f32::total_cmp` when compared as signed integers, with
-/// the low 4 bits replaced by `i` so that keys of distinct positions always differ (ties, and
-/// centroids closer than 2^-19 relative, order by position).
+/// Per lane, a key that orders floats like `f32::total_cmp` when compared as signed integers,
+/// with the low 4 bits replaced by `i` so that keys of distinct positions always differ (ties,
+/// and centroids closer than 2^-19 relative, order by position).
 #[inline(always)]
-fn order_key(x: f32, i: usize) -> i32 {
-    let b = x.to_bits() as i32;
-    (b ^ (((b >> 31) as u32) >> 1) as i32) & !15 | i as i32
+fn order_keys(x: f32x4, i: usize) -> i32x4 {
+    let b: i32x4 = bytemuck::cast(x);
+    let flip: i32x4 = bytemuck::cast(bytemuck::cast::<_, u32x4>(b >> 31) >> 1);
+    (b ^ flip) & i32x4::splat(!15) | i32x4::splat(i as i32)
 }
 
 /// The primitives of a small range (at most [`SMALL`]) in centroid order on each axis, as
@@ -624,30 +625,36 @@ impl Orders {
     /// distinct, so the ranks are a permutation whatever the values).
     fn of(refs: &[PrimRef]) -> Orders {
         if refs.len() <= 8 {
-            Orders::rank::<8>(refs)
+            Orders::rank::<1>(refs)
         } else {
-            Orders::rank::<SMALL>(refs)
+            Orders::rank::<2>(refs)
         }
     }
-    fn rank<const L: usize>(refs: &[PrimRef]) -> Orders {
+    /// [`Orders::of`] for at most `8 * V` primitives, keys in `V` vectors of eight.
+    fn rank<const V: usize>(refs: &[PrimRef]) -> Orders {
+        let n = refs.len().min(8 * V);
         // Padding keys are larger than any real one, so they never count.
-        let mut keys = [[i32::MAX; L]; 3];
-        for (i, r) in refs.iter().enumerate().take(L) {
-            let c = r.center2();
+        let mut keys = [[[i32::MAX; 8]; V]; 3];
+        for (i, r) in refs[..n].iter().enumerate() {
+            let c = order_keys(center2(r), i).to_array();
             for k in 0..3 {
-                keys[k][i] = order_key(c[k], i);
+                keys[k][(i / 8) % V][i % 8] = c[k];
             }
         }
         let mut orders = [[0u8; SMALL]; 3];
         for (key, order) in keys.iter().zip(&mut orders) {
-            // All ranks at once (vectorized over i): rank[i] counts the keys below key[i].
-            let mut rank = [0u32; L];
-            for &kj in key {
-                for (r, &ki) in rank.iter_mut().zip(key) {
-                    *r += (kj < ki) as u32;
+            // All ranks at once (vectorized over i): rank[i] counts the real keys below
+            // key[i] (a true comparison is -1).
+            let ki = key.map(i32x8::new);
+            let mut rank = [i32x8::ZERO; V];
+            for &kj in &key.as_flattened()[..n] {
+                let kj = i32x8::splat(kj);
+                for (r, ki) in rank.iter_mut().zip(&ki) {
+                    *r -= ki.simd_gt(kj);
                 }
             }
-            for (i, &r) in rank.iter().enumerate().take(refs.len()) {
+            let rank = rank.map(|r| r.to_array());
+            for (i, &r) in rank.as_flattened()[..n].iter().enumerate() {
                 order[r as usize & (SMALL - 1)] = i as u8;
             }
         }
