@@ -849,14 +849,6 @@ pub fn build(
     out.tree(Some(root))
 }
 
-#[derive(Clone, Copy)]
-struct Part {
-    begin: usize,
-    end: usize,
-    info: RangeInfo,
-    orders: Option<Orders>,
-}
-
 fn build_child(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
@@ -887,35 +879,23 @@ fn build_child(
             return leaf;
         }
     }
-    let mut parts = [Part {
-        begin: 0,
-        end: 0,
-        info: RangeInfo::EMPTY,
-        orders: None,
-    }; WIDTH];
-    parts[0] = Part {
-        begin: 0,
-        end: first.mid,
-        info: first.left,
-        orders: first_l,
-    };
-    parts[1] = Part {
-        begin: first.mid,
-        end: n,
-        info: first.right,
-        orders: first_r,
-    };
+    // The parts, field by field: a part's orders are large, and are moved only where used.
+    let mut ranges = [(0usize, 0usize); WIDTH];
+    let mut infos = [RangeInfo::EMPTY; WIDTH];
+    let mut orders: [Option<Orders>; WIDTH] = [None; WIDTH];
+    (ranges[0], infos[0], orders[0]) = ((0, first.mid), first.left, first_l);
+    (ranges[1], infos[1], orders[1]) = ((first.mid, n), first.right, first_r);
     // Each part's area when it has at least two primitives (else -1, never picked).
-    let area = |p: &Part| {
-        if p.end - p.begin >= 2 {
-            p.info.bounds.half_area()
+    let area = |(begin, end): (usize, usize), info: &RangeInfo| {
+        if end - begin >= 2 {
+            info.bounds.half_area()
         } else {
             -1.0
         }
     };
     let mut areas = [-1.0f32; WIDTH];
-    areas[0] = area(&parts[0]);
-    areas[1] = area(&parts[1]);
+    areas[0] = area(ranges[0], &infos[0]);
+    areas[1] = area(ranges[1], &infos[1]);
     // Slot order as a list: part 0 starts the range, and a split part's right side follows
     // it (no sort of the parts afterwards).
     let mut next = [0u8; WIDTH];
@@ -932,60 +912,50 @@ fn build_child(
             }
         }
         let Some(i) = pick else { break };
-        let p = parts[i];
+        let (begin, end) = ranges[i];
+        let parent = orders[i].take();
         let (s, lo, ro) = split(
-            &mut refs[p.begin..p.end],
-            &mut aux[p.begin..p.end],
-            &p.info,
-            p.orders.as_ref(),
+            &mut refs[begin..end],
+            &mut aux[begin..end],
+            &infos[i],
+            parent.as_ref(),
             ctx,
             depth,
         );
-        parts[i] = Part {
-            begin: p.begin,
-            end: p.begin + s.mid,
-            info: s.left,
-            orders: lo,
-        };
-        parts[count] = Part {
-            begin: p.begin + s.mid,
-            end: p.end,
-            info: s.right,
-            orders: ro,
-        };
-        areas[i] = area(&parts[i]);
-        areas[count] = area(&parts[count]);
+        let mid = begin + s.mid;
+        (ranges[i], infos[i], orders[i]) = ((begin, mid), s.left, lo);
+        (ranges[count], infos[count], orders[count]) = ((mid, end), s.right, ro);
+        areas[i] = area(ranges[i], &infos[i]);
+        areas[count] = area(ranges[count], &infos[count]);
         next[count] = next[i];
         next[i] = count as u8;
         count += 1;
     }
-    let mut cur = 0;
-    let in_order: [usize; WIDTH] = std::array::from_fn(|_| {
-        let j = cur;
-        cur = next[j] as usize & (WIDTH - 1);
-        j
-    });
-    // Hand each part its own disjoint slice, then build them (in parallel when large).
-    type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
-    let mut slices: [Slot; WIDTH] = Default::default();
-    let (mut rest, mut aux_rest) = (refs, aux);
-    let mut at = 0;
-    for (slot, p) in slices
-        .iter_mut()
-        .zip(in_order[..count].iter().map(|&j| &parts[j]))
-    {
-        let (_, tail) = rest.split_at_mut(p.begin - at);
-        let (mine, tail) = tail.split_at_mut(p.end - p.begin);
-        let (_, atail) = aux_rest.split_at_mut(p.begin - at);
-        let (amine, atail) = atail.split_at_mut(p.end - p.begin);
-        *slot = Some((mine, amine, base + p.begin as u32, p.info));
-        rest = tail;
-        aux_rest = atail;
-        at = p.end;
-    }
     let me = out.reserve();
     let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
     if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+        let mut cur = 0;
+        let in_order: [usize; WIDTH] = std::array::from_fn(|_| {
+            let j = cur;
+            cur = next[j] as usize & (WIDTH - 1);
+            j
+        });
+        // Hand each part its own disjoint slice, then build them in parallel.
+        type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
+        let mut slices: [Slot; WIDTH] = Default::default();
+        let (mut rest, mut aux_rest) = (refs, aux);
+        let mut at = 0;
+        for (slot, &j) in slices.iter_mut().zip(&in_order[..count]) {
+            let (begin, end) = ranges[j];
+            let (_, tail) = rest.split_at_mut(begin - at);
+            let (mine, tail) = tail.split_at_mut(end - begin);
+            let (_, atail) = aux_rest.split_at_mut(begin - at);
+            let (amine, atail) = atail.split_at_mut(end - begin);
+            *slot = Some((mine, amine, base + begin as u32, infos[j]));
+            rest = tail;
+            aux_rest = atail;
+            at = end;
+        }
         // Subtrees on their own lists, appended in slot order: the same nodes in the same
         // order as the sequential path below.
         let built: Vec<((Aabb, Child), NodeList)> = slices
@@ -1001,8 +971,13 @@ fn build_child(
             *slot = (b, out.append(c, sub));
         }
     } else {
-        for (slot, (s, a, b, i)) in children.iter_mut().zip(slices.into_iter().flatten()) {
-            *slot = build_child(s, a, b, i, ctx, depth + 1, out);
+        // The parts in slot order, each on its own piece of the range.
+        let mut j = 0;
+        for slot in &mut children[..count] {
+            let (begin, end) = ranges[j];
+            let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
+            *slot = build_child(s, a, base + begin as u32, infos[j], ctx, depth + 1, out);
+            j = next[j] as usize & (WIDTH - 1);
         }
     }
     out.set(me, tree::node(children.into_iter().take(count)));
