@@ -363,7 +363,7 @@ impl<const N: usize> Bins<N> {
             best_at = better.select(f32x4::splat(i as f32), best_at);
         }
         let best: [(f32, usize); 3] = {
-            let (c, a) = (best_cost.to_array(), best_at.to_array());
+            let (c, a) = (best_cost.to_array(), best_at.fast_trunc_int().to_array());
             std::array::from_fn(|k| (c[k], a[k] as usize))
         };
         let mut pick: Option<(usize, usize, f32)> = None;
@@ -710,7 +710,8 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
         best_at = better.select(f32x4::splat(i as f32), best_at);
     }
     // The first axis of least cost: the same winner as sweeping the axes in turn.
-    let (cost, at) = (best_cost.to_array(), best_at.to_array());
+    // (The positions are small whole numbers: truncated as a vector, not converted one by one.)
+    let (cost, at) = (best_cost.to_array(), best_at.fast_trunc_int().to_array());
     let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
     for k in 0..3 {
         if cost[k] < best_cost {
