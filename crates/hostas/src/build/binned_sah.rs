@@ -933,7 +933,7 @@ fn build_child(
         count += 1;
     }
     let me = out.reserve();
-    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
+    let mut node = Node::EMPTY;
     if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
         let mut cur = 0;
         let in_order: [usize; WIDTH] = std::array::from_fn(|_| {
@@ -968,20 +968,21 @@ fn build_child(
                 (c, sub)
             })
             .collect();
-        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
-            *slot = (b, out.append(c, sub));
+        for (k, ((b, c), sub)) in built.into_iter().enumerate() {
+            tree::set_child(&mut node, k, &b, out.append(c, sub));
         }
     } else {
         // The parts in slot order, each on its own piece of the range.
         let mut j = 0;
-        for slot in &mut children[..count] {
+        for k in 0..count {
             let (begin, end) = ranges[j];
             let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
-            *slot = build_child(s, a, base + begin as u32, infos[j], ctx, depth + 1, out);
+            let (b, c) = build_child(s, a, base + begin as u32, infos[j], ctx, depth + 1, out);
+            tree::set_child(&mut node, k, &b, c);
             j = next[j] as usize & (WIDTH - 1);
         }
     }
-    out.set(me, tree::node(children.into_iter().take(count)));
+    out.set(me, node);
     (info.bounds, Child::Inner(me))
 }
 
