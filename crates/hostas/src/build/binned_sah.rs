@@ -850,6 +850,18 @@ pub fn build(
     out.tree(Some(root))
 }
 
+/// A leaf over the `n` primitives from position `base`.
+#[inline(always)]
+fn leaf(info: &RangeInfo, base: u32, n: usize) -> (Aabb, Child) {
+    (
+        info.bounds,
+        Child::Leaf {
+            first: base,
+            count: n as u32,
+        },
+    )
+}
+
 fn build_child(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
@@ -860,16 +872,10 @@ fn build_child(
     out: &mut NodeList,
 ) -> (Aabb, Child) {
     let n = refs.len();
-    let leaf = (
-        info.bounds,
-        Child::Leaf {
-            first: base,
-            count: n as u32,
-        },
-    );
+    let as_leaf = leaf(&info, base, n);
     // Fewer primitives than a node has slots: always a leaf (so every inner node is full).
     if n < WIDTH {
-        return leaf;
+        return as_leaf;
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
@@ -877,7 +883,7 @@ fn build_child(
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
         if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
-            return leaf;
+            return as_leaf;
         }
     }
     // The parts, field by field: a part's orders are large, and are moved only where used.
@@ -976,8 +982,14 @@ fn build_child(
         let mut j = 0;
         for k in 0..count {
             let (begin, end) = ranges[j];
-            let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
-            let (b, c) = build_child(s, a, base + begin as u32, infos[j], ctx, depth + 1, out);
+            let first = base + begin as u32;
+            // Most children are small leaves: made here, without a call.
+            let (b, c) = if end - begin < WIDTH {
+                leaf(&infos[j], first, end - begin)
+            } else {
+                let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
+                build_child(s, a, first, infos[j], ctx, depth + 1, out)
+            };
             tree::set_child(&mut node, k, &b, c);
             j = next[j] as usize & (WIDTH - 1);
         }
