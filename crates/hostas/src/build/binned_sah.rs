@@ -522,6 +522,8 @@ fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, B
     (i, storage[1], storage[0])
 }
 
+// Not inlined into `split`: see `sweep`.
+#[inline(never)]
 fn binned_split_n<const N: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
@@ -676,6 +678,8 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
 }
 
 /// [`sweep_split`] for ranges of at most `L` primitives (`L` a power of two up to [`SMALL`]).
+// Not inlined: inside `split`, its frame and spills cost every split more than the call does.
+#[inline(never)]
 fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
     let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
