@@ -701,17 +701,20 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
     let mut acc = [Box8::EMPTY; 3];
     // Per axis, the first position of least cost (a NaN or infinite cost never wins).
     let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::splat((n / 2) as f32));
+    // The sides' counts `i` and `n - i` as floats, counted (small whole numbers: exact).
+    let (mut left_n, mut right_n) = (f32x4::ZERO, f32x4::splat(n as f32));
     for i in 1..n {
         for k in 0..3 {
             acc[k].grow(&boxes[o[k][i - 1] as usize & (L - 1)]);
         }
+        left_n += f32x4::ONE;
+        right_n -= f32x4::ONE;
         let right = right_area[i & (L - 1)];
-        let cost =
-            half_areas3(&acc) * f32x4::splat(i as f32) + right * f32x4::splat((n - i) as f32);
+        let cost = half_areas3(&acc) * left_n + right * right_n;
         // Selects, not branches: which position wins is data, not pattern.
         let better = cost.simd_lt(best_cost);
         best_cost = better.select(cost, best_cost);
-        best_at = better.select(f32x4::splat(i as f32), best_at);
+        best_at = better.select(left_n, best_at);
     }
     // The first axis of least cost: the same winner as sweeping the axes in turn.
     // (The positions are small whole numbers: truncated as a vector, not converted one by one.)
