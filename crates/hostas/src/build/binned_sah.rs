@@ -9,7 +9,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{Node, WIDTH};
 use crate::math::{Aabb, Box4, fmin8};
 use rayon::prelude::*;
-use wide::{f32x4, f32x8};
+use wide::{f32x4, f32x8, i32x4, i32x8, u32x4};
 
 pub const MAX_BINS: usize = 32;
 /// Ranges up to this size are split by an exact sweep instead of binning.
@@ -47,15 +47,6 @@ impl Box8 {
         let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(self.0);
         (lo, neg_hi)
     }
-    #[inline(always)]
-    fn half_area(&self) -> f32 {
-        let (lo, neg_hi) = self.halves();
-        // The negated extent (exactly): its products are the extent's.
-        let d = (lo + neg_hi).to_array();
-        // No test for empty boxes: theirs is infinite, and times a count of zero it makes a
-        // NaN cost, which loses every comparison.
-        d[0] * d[1] + d[1] * d[2] + d[2] * d[0]
-    }
     /// The doubled centroid (lane 3 is meaningless).
     #[inline(always)]
     fn center2(&self) -> f32x4 {
@@ -72,10 +63,12 @@ impl Box8 {
     }
 }
 
-/// The half areas of three boxes, in lanes 0 to 2 (the same arithmetic as
-/// [`Box8::half_area`], three at a time).
+/// The half areas of three boxes, in lanes 0 to 2: `d0 * d1 + d1 * d2 + d2 * d0` of each
+/// box's extent `d`. No test for empty boxes: theirs is infinite, and times a count of zero it
+/// makes a NaN cost, which loses every comparison.
 #[inline(always)]
 fn half_areas3(b: &[Box8; 3]) -> f32x4 {
+    // The negated extents (exactly): their products are the extents'.
     let d = |b: &Box8| {
         let (lo, neg_hi) = b.halves();
         lo + neg_hi
@@ -95,6 +88,8 @@ fn center2(r: &PrimRef) -> f32x4 {
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct RangeInfo {
     pub bounds: Aabb,
+    /// Empty for the ranges that splits of small ranges make: those are swept, never binned,
+    /// so nothing reads them (the median split finds its own, see [`median_split`]).
     pub centroids: Aabb,
 }
 
@@ -141,6 +136,13 @@ impl RangeInfo {
         RangeInfo {
             bounds: a.bounds.union(&b.bounds),
             centroids: a.centroids.union(&b.centroids),
+        }
+    }
+    /// A small range's info: its bounds only.
+    fn bounded(bounds: &Box8) -> RangeInfo {
+        RangeInfo {
+            bounds: bounds.aabb(),
+            centroids: Aabb::EMPTY,
         }
     }
     pub fn of(refs: &[PrimRef]) -> RangeInfo {
@@ -325,32 +327,45 @@ impl<const N: usize> Bins<N> {
     /// The best split plane: (axis, first bin of the right side, cost). Planes with an empty
     /// side cost NaN (an empty box's infinite area times a zero count) and never win.
     fn best(&self, binner: &Binner) -> Option<(usize, usize, f32)> {
-        // The three axes side by side (independent chains), each keeping its first plane of
-        // least cost with selects; then the first axis of least cost: the same winner as
-        // sweeping the axes in turn.
-        let mut right_cost = [[0f32; N]; 3];
+        // The three axes side by side in the lanes of one vector (their areas computed
+        // together, see `half_areas3`), each keeping its first plane of least cost with
+        // selects; then the first axis of least cost: the same winner as sweeping the axes in
+        // turn. (Counts are below 2^31: as `i32` they convert to the same floats.)
+        let counts = |i: usize| {
+            i32x4::new([
+                self.counts[0][i] as i32,
+                self.counts[1][i] as i32,
+                self.counts[2][i] as i32,
+                0,
+            ])
+        };
+        let mut right_cost = [f32x4::ZERO; N];
         let mut acc = [Box8::EMPTY; 3];
-        let mut n = [0u32; 3];
+        let mut n = i32x4::ZERO;
         for i in (1..N).rev() {
             for k in 0..3 {
                 acc[k].grow(&self.bounds[k][i]);
-                n[k] += self.counts[k][i];
-                right_cost[k][i] = acc[k].half_area() * n[k] as f32;
             }
+            n += counts(i);
+            right_cost[i] = half_areas3(&acc) * f32x4::from_i32x4(n);
         }
         let mut acc = [Box8::EMPTY; 3];
-        let mut n = [0u32; 3];
-        let mut best = [(f32::INFINITY, 0usize); 3];
+        let mut n = i32x4::ZERO;
+        let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::ZERO);
         for i in 1..N {
             for k in 0..3 {
                 acc[k].grow(&self.bounds[k][i - 1]);
-                n[k] += self.counts[k][i - 1];
-                let cost = acc[k].half_area() * n[k] as f32 + right_cost[k][i];
-                let better = cost < best[k].0;
-                best[k].0 = if better { cost } else { best[k].0 };
-                best[k].1 = if better { i } else { best[k].1 };
             }
+            n += counts(i - 1);
+            let cost = half_areas3(&acc) * f32x4::from_i32x4(n) + right_cost[i];
+            let better = cost.simd_lt(best_cost);
+            best_cost = better.select(cost, best_cost);
+            best_at = better.select(f32x4::splat(i as f32), best_at);
         }
+        let best: [(f32, usize); 3] = {
+            let (c, a) = (best_cost.to_array(), best_at.fast_trunc_int().to_array());
+            std::array::from_fn(|k| (c[k], a[k] as usize))
+        };
         let mut pick: Option<(usize, usize, f32)> = None;
         let mut best_cost = f32::INFINITY;
         for (k, &(cost, i)) in best.iter().enumerate() {
@@ -507,6 +522,8 @@ fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, B
     (i, storage[1], storage[0])
 }
 
+// Not inlined into `split`: see `sweep`.
+#[inline(never)]
 fn binned_split_n<const N: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
@@ -589,13 +606,14 @@ fn binned_split(
     }
 }
 
-/// A key that orders floats like `f32::total_cmp` when compared as signed integers, with
-/// the low 4 bits replaced by `i` so that keys of distinct positions always differ (ties, and
-/// centroids closer than 2^-19 relative, order by position).
+/// Per lane, a key that orders floats like `f32::total_cmp` when compared as signed integers,
+/// with the low 4 bits replaced by `i` so that keys of distinct positions always differ (ties,
+/// and centroids closer than 2^-19 relative, order by position).
 #[inline(always)]
-fn order_key(x: f32, i: usize) -> i32 {
-    let b = x.to_bits() as i32;
-    (b ^ (((b >> 31) as u32) >> 1) as i32) & !15 | i as i32
+fn order_keys(x: f32x4, i: usize) -> i32x4 {
+    let b: i32x4 = bytemuck::cast(x);
+    let flip: i32x4 = bytemuck::cast(bytemuck::cast::<_, u32x4>(b >> 31) >> 1);
+    (b ^ flip) & i32x4::splat(!15) | i32x4::splat(i as i32)
 }
 
 /// The primitives of a small range (at most [`SMALL`]) in centroid order on each axis, as
@@ -609,30 +627,36 @@ impl Orders {
     /// distinct, so the ranks are a permutation whatever the values).
     fn of(refs: &[PrimRef]) -> Orders {
         if refs.len() <= 8 {
-            Orders::rank::<8>(refs)
+            Orders::rank::<1>(refs)
         } else {
-            Orders::rank::<SMALL>(refs)
+            Orders::rank::<2>(refs)
         }
     }
-    fn rank<const L: usize>(refs: &[PrimRef]) -> Orders {
+    /// [`Orders::of`] for at most `8 * V` primitives, keys in `V` vectors of eight.
+    fn rank<const V: usize>(refs: &[PrimRef]) -> Orders {
+        let n = refs.len().min(8 * V);
         // Padding keys are larger than any real one, so they never count.
-        let mut keys = [[i32::MAX; L]; 3];
-        for (i, r) in refs.iter().enumerate().take(L) {
-            let c = r.center2();
+        let mut keys = [[[i32::MAX; 8]; V]; 3];
+        for (i, r) in refs[..n].iter().enumerate() {
+            let c = order_keys(center2(r), i).to_array();
             for k in 0..3 {
-                keys[k][i] = order_key(c[k], i);
+                keys[k][(i / 8) % V][i % 8] = c[k];
             }
         }
         let mut orders = [[0u8; SMALL]; 3];
         for (key, order) in keys.iter().zip(&mut orders) {
-            // All ranks at once (vectorized over i): rank[i] counts the keys below key[i].
-            let mut rank = [0u32; L];
-            for &kj in key {
-                for (r, &ki) in rank.iter_mut().zip(key) {
-                    *r += (kj < ki) as u32;
+            // All ranks at once (vectorized over i): rank[i] counts the real keys below
+            // key[i] (a true comparison is -1).
+            let ki = key.map(i32x8::new);
+            let mut rank = [i32x8::ZERO; V];
+            for &kj in &key.as_flattened()[..n] {
+                let kj = i32x8::splat(kj);
+                for (r, ki) in rank.iter_mut().zip(&ki) {
+                    *r -= ki.simd_gt(kj);
                 }
             }
-            for (i, &r) in rank.iter().enumerate().take(refs.len()) {
+            let rank = rank.map(|r| r.to_array());
+            for (i, &r) in rank.as_flattened()[..n].iter().enumerate() {
                 order[r as usize & (SMALL - 1)] = i as u8;
             }
         }
@@ -642,42 +666,59 @@ impl Orders {
 
 /// Exact SAH split of a small range (2 to [`SMALL`] primitives) given its orders: sweep
 /// every position on every axis, then permute the references once, for the winning axis.
-/// Returns the split and the orders of both sides.
+/// Returns the split and the orders of both sides. The sides' infos carry bounds only (see
+/// [`RangeInfo::centroids`]).
 fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
-    let n = refs.len().min(SMALL);
+    // Most swept ranges have 8 or fewer primitives: half-size working arrays for them.
+    if refs.len() <= 8 {
+        sweep::<8>(refs, orders)
+    } else {
+        sweep::<SMALL>(refs, orders)
+    }
+}
+
+/// [`sweep_split`] for ranges of at most `L` primitives (`L` a power of two up to [`SMALL`]).
+// Not inlined: inside `split`, its frame and spills cost every split more than the call does.
+#[inline(never)]
+fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+    let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
-    let mut boxes = [Box8::EMPTY; SMALL];
+    let mut boxes = [Box8::EMPTY; L];
     for (b, r) in boxes.iter_mut().zip(refs.iter()) {
         *b = Box8::of(r);
     }
     // The three axes are swept side by side: three independent chains of box growth, their
     // areas computed together.
     let o = &orders.0;
-    let mut right_area = [f32x4::ZERO; SMALL];
+    let mut right_area = [f32x4::ZERO; L];
     let mut acc = [Box8::EMPTY; 3];
     for i in (1..n).rev() {
         for k in 0..3 {
-            acc[k].grow(&boxes[o[k][i] as usize & (SMALL - 1)]);
+            acc[k].grow(&boxes[o[k][i] as usize & (L - 1)]);
         }
-        right_area[i & (SMALL - 1)] = half_areas3(&acc);
+        right_area[i & (L - 1)] = half_areas3(&acc);
     }
     let mut acc = [Box8::EMPTY; 3];
     // Per axis, the first position of least cost (a NaN or infinite cost never wins).
     let (mut best_cost, mut best_at) = (f32x4::splat(f32::INFINITY), f32x4::splat((n / 2) as f32));
+    // The sides' counts `i` and `n - i` as floats, counted (small whole numbers: exact).
+    let (mut left_n, mut right_n) = (f32x4::ZERO, f32x4::splat(n as f32));
     for i in 1..n {
         for k in 0..3 {
-            acc[k].grow(&boxes[o[k][i - 1] as usize & (SMALL - 1)]);
+            acc[k].grow(&boxes[o[k][i - 1] as usize & (L - 1)]);
         }
-        let right = right_area[i & (SMALL - 1)];
-        let cost =
-            half_areas3(&acc) * f32x4::splat(i as f32) + right * f32x4::splat((n - i) as f32);
+        left_n += f32x4::ONE;
+        right_n -= f32x4::ONE;
+        let right = right_area[i & (L - 1)];
+        let cost = half_areas3(&acc) * left_n + right * right_n;
         // Selects, not branches: which position wins is data, not pattern.
         let better = cost.simd_lt(best_cost);
         best_cost = better.select(cost, best_cost);
-        best_at = better.select(f32x4::splat(i as f32), best_at);
+        best_at = better.select(left_n, best_at);
     }
     // The first axis of least cost: the same winner as sweeping the axes in turn.
-    let (cost, at) = (best_cost.to_array(), best_at.to_array());
+    // (The positions are small whole numbers: truncated as a vector, not converted one by one.)
+    let (cost, at) = (best_cost.to_array(), best_at.fast_trunc_int().to_array());
     let (mut best_cost, mut best_axis, mut best_mid) = (f32::INFINITY, 3, n / 2);
     for k in 0..3 {
         if cost[k] < best_cost {
@@ -687,14 +728,20 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
     // No finite cost (NaN bounds): split in the middle, in the current order.
     let identity: [u8; SMALL] = std::array::from_fn(|i| i as u8);
     let perm = orders.0.get(best_axis).unwrap_or(&identity);
-    let mut pos = [0u8; SMALL];
+    let mut pos = [0u8; L];
+    let (mut left, mut right) = (Box8::EMPTY, Box8::EMPTY);
     for (i, (dst, &src)) in refs.iter_mut().zip(&perm[..n]).enumerate() {
-        let b = &boxes[src as usize & (SMALL - 1)];
+        let b = &boxes[src as usize & (L - 1)];
         *dst = b.prim_ref();
-        pos[src as usize & (SMALL - 1)] = i as u8;
+        pos[src as usize & (L - 1)] = i as u8;
+        // Both sides' bounds, grown in the new order (the same bits as from the references).
+        if i < best_mid {
+            left.grow(b);
+        } else {
+            right.grow(b);
+        }
     }
-    let (left, right) = refs.split_at(best_mid);
-    let (left, right) = (Acc::of(left), Acc::of(right));
+    let (left, right) = (RangeInfo::bounded(&left), RangeInfo::bounded(&right));
     // Each side's orders: the range's orders filtered, as positions after the permutation.
     // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
@@ -705,9 +752,9 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
         }
         let (mut li, mut ri) = (0, 0);
         for &o in &orders.0[k][..n] {
-            let p = pos[o as usize & (SMALL - 1)];
-            lo[k][li & (SMALL - 1)] = p;
-            ro[k][ri & (SMALL - 1)] = p.wrapping_sub(mid);
+            let p = pos[o as usize & (L - 1)];
+            lo[k][li & (L - 1)] = p;
+            ro[k][ri & (L - 1)] = p.wrapping_sub(mid);
             li += (p < mid) as usize;
             ri += (p >= mid) as usize;
         }
@@ -725,7 +772,13 @@ fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders)
 /// halves, so it bounds depth and handles coincident centroids.
 fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     let mid = refs.len() / 2;
-    let ext = [0, 1, 2].map(|k| info.centroids.hi[k] - info.centroids.lo[k]);
+    // Small ranges' infos have no centroid bounds.
+    let centroids = if refs.len() <= SMALL {
+        Acc::of(refs).centroids
+    } else {
+        info.centroids
+    };
+    let ext = [0, 1, 2].map(|k| centroids.hi[k] - centroids.lo[k]);
     let axis = (0..3)
         .max_by(|&a, &b| ext[a].total_cmp(&ext[b]))
         .unwrap_or(0);
@@ -759,7 +812,8 @@ fn split(
     }
     if refs.len() == 2 {
         // One way to split two: no orders to sort or sweep.
-        let (l, r) = (Acc::of(&refs[..1]), Acc::of(&refs[1..]));
+        let (l, r) = (Box8::of(&refs[0]), Box8::of(&refs[1]));
+        let (l, r) = (RangeInfo::bounded(&l), RangeInfo::bounded(&r));
         let cost = l.bounds.half_area() + r.bounds.half_area();
         let one = Orders([[0; SMALL]; 3]);
         let s = Split {
@@ -803,12 +857,16 @@ pub fn build(
     out.tree(Some(root))
 }
 
-#[derive(Clone, Copy)]
-struct Part {
-    begin: usize,
-    end: usize,
-    info: RangeInfo,
-    orders: Option<Orders>,
+/// A leaf over the `n` primitives from position `base`.
+#[inline(always)]
+fn leaf(info: &RangeInfo, base: u32, n: usize) -> (Aabb, Child) {
+    (
+        info.bounds,
+        Child::Leaf {
+            first: base,
+            count: n as u32,
+        },
+    )
 }
 
 fn build_child(
@@ -821,16 +879,10 @@ fn build_child(
     out: &mut NodeList,
 ) -> (Aabb, Child) {
     let n = refs.len();
-    let leaf = (
-        info.bounds,
-        Child::Leaf {
-            first: base,
-            count: n as u32,
-        },
-    );
+    let as_leaf = leaf(&info, base, n);
     // Fewer primitives than a node has slots: always a leaf (so every inner node is full).
     if n < WIDTH {
-        return leaf;
+        return as_leaf;
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
@@ -838,38 +890,26 @@ fn build_child(
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
         if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
-            return leaf;
+            return as_leaf;
         }
     }
-    let mut parts = [Part {
-        begin: 0,
-        end: 0,
-        info: RangeInfo::EMPTY,
-        orders: None,
-    }; WIDTH];
-    parts[0] = Part {
-        begin: 0,
-        end: first.mid,
-        info: first.left,
-        orders: first_l,
-    };
-    parts[1] = Part {
-        begin: first.mid,
-        end: n,
-        info: first.right,
-        orders: first_r,
-    };
+    // The parts, field by field: a part's orders are large, and are moved only where used.
+    let mut ranges = [(0usize, 0usize); WIDTH];
+    let mut infos = [RangeInfo::EMPTY; WIDTH];
+    let mut orders: [Option<Orders>; WIDTH] = [None; WIDTH];
+    (ranges[0], infos[0], orders[0]) = ((0, first.mid), first.left, first_l);
+    (ranges[1], infos[1], orders[1]) = ((first.mid, n), first.right, first_r);
     // Each part's area when it has at least two primitives (else -1, never picked).
-    let area = |p: &Part| {
-        if p.end - p.begin >= 2 {
-            p.info.bounds.half_area()
+    let area = |(begin, end): (usize, usize), info: &RangeInfo| {
+        if end - begin >= 2 {
+            info.bounds.half_area()
         } else {
             -1.0
         }
     };
     let mut areas = [-1.0f32; WIDTH];
-    areas[0] = area(&parts[0]);
-    areas[1] = area(&parts[1]);
+    areas[0] = area(ranges[0], &infos[0]);
+    areas[1] = area(ranges[1], &infos[1]);
     // Slot order as a list: part 0 starts the range, and a split part's right side follows
     // it (no sort of the parts afterwards).
     let mut next = [0u8; WIDTH];
@@ -886,60 +926,50 @@ fn build_child(
             }
         }
         let Some(i) = pick else { break };
-        let p = parts[i];
+        let (begin, end) = ranges[i];
+        let parent = orders[i].take();
         let (s, lo, ro) = split(
-            &mut refs[p.begin..p.end],
-            &mut aux[p.begin..p.end],
-            &p.info,
-            p.orders.as_ref(),
+            &mut refs[begin..end],
+            &mut aux[begin..end],
+            &infos[i],
+            parent.as_ref(),
             ctx,
             depth,
         );
-        parts[i] = Part {
-            begin: p.begin,
-            end: p.begin + s.mid,
-            info: s.left,
-            orders: lo,
-        };
-        parts[count] = Part {
-            begin: p.begin + s.mid,
-            end: p.end,
-            info: s.right,
-            orders: ro,
-        };
-        areas[i] = area(&parts[i]);
-        areas[count] = area(&parts[count]);
+        let mid = begin + s.mid;
+        (ranges[i], infos[i], orders[i]) = ((begin, mid), s.left, lo);
+        (ranges[count], infos[count], orders[count]) = ((mid, end), s.right, ro);
+        areas[i] = area(ranges[i], &infos[i]);
+        areas[count] = area(ranges[count], &infos[count]);
         next[count] = next[i];
         next[i] = count as u8;
         count += 1;
     }
-    let mut cur = 0;
-    let in_order: [usize; WIDTH] = std::array::from_fn(|_| {
-        let j = cur;
-        cur = next[j] as usize & (WIDTH - 1);
-        j
-    });
-    // Hand each part its own disjoint slice, then build them (in parallel when large).
-    type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
-    let mut slices: [Slot; WIDTH] = Default::default();
-    let (mut rest, mut aux_rest) = (refs, aux);
-    let mut at = 0;
-    for (slot, p) in slices
-        .iter_mut()
-        .zip(in_order[..count].iter().map(|&j| &parts[j]))
-    {
-        let (_, tail) = rest.split_at_mut(p.begin - at);
-        let (mine, tail) = tail.split_at_mut(p.end - p.begin);
-        let (_, atail) = aux_rest.split_at_mut(p.begin - at);
-        let (amine, atail) = atail.split_at_mut(p.end - p.begin);
-        *slot = Some((mine, amine, base + p.begin as u32, p.info));
-        rest = tail;
-        aux_rest = atail;
-        at = p.end;
-    }
     let me = out.reserve();
-    let mut children = [(Aabb::EMPTY, Child::Leaf { first: 0, count: 0 }); WIDTH];
+    let mut node = Node::EMPTY;
     if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+        let mut cur = 0;
+        let in_order: [usize; WIDTH] = std::array::from_fn(|_| {
+            let j = cur;
+            cur = next[j] as usize & (WIDTH - 1);
+            j
+        });
+        // Hand each part its own disjoint slice, then build them in parallel.
+        type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
+        let mut slices: [Slot; WIDTH] = Default::default();
+        let (mut rest, mut aux_rest) = (refs, aux);
+        let mut at = 0;
+        for (slot, &j) in slices.iter_mut().zip(&in_order[..count]) {
+            let (begin, end) = ranges[j];
+            let (_, tail) = rest.split_at_mut(begin - at);
+            let (mine, tail) = tail.split_at_mut(end - begin);
+            let (_, atail) = aux_rest.split_at_mut(begin - at);
+            let (amine, atail) = atail.split_at_mut(end - begin);
+            *slot = Some((mine, amine, base + begin as u32, infos[j]));
+            rest = tail;
+            aux_rest = atail;
+            at = end;
+        }
         // Subtrees on their own lists, appended in slot order: the same nodes in the same
         // order as the sequential path below.
         let built: Vec<((Aabb, Child), NodeList)> = slices
@@ -951,15 +981,27 @@ fn build_child(
                 (c, sub)
             })
             .collect();
-        for (slot, ((b, c), sub)) in children.iter_mut().zip(built) {
-            *slot = (b, out.append(c, sub));
+        for (k, ((b, c), sub)) in built.into_iter().enumerate() {
+            tree::set_child(&mut node, k, &b, out.append(c, sub));
         }
     } else {
-        for (slot, (s, a, b, i)) in children.iter_mut().zip(slices.into_iter().flatten()) {
-            *slot = build_child(s, a, b, i, ctx, depth + 1, out);
+        // The parts in slot order, each on its own piece of the range.
+        let mut j = 0;
+        for k in 0..count {
+            let (begin, end) = ranges[j];
+            let first = base + begin as u32;
+            // Most children are small leaves: made here, without a call.
+            let (b, c) = if end - begin < WIDTH {
+                leaf(&infos[j], first, end - begin)
+            } else {
+                let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
+                build_child(s, a, first, infos[j], ctx, depth + 1, out)
+            };
+            tree::set_child(&mut node, k, &b, c);
+            j = next[j] as usize & (WIDTH - 1);
         }
     }
-    out.set(me, tree::node(children.into_iter().take(count)));
+    out.set(me, node);
     (info.bounds, Child::Inner(me))
 }
 

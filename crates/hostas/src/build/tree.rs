@@ -18,21 +18,20 @@ pub enum Child {
     Inner(u32),
 }
 
-/// The node for up to `WIDTH` children, each with its exact bounds (builders always give all
-/// of them, see the size plan); missing slots stay empty.
-pub fn node(children: impl IntoIterator<Item = (Aabb, Child)>) -> Node {
-    let mut node = Node::EMPTY;
-    for (k, (b, c)) in children.into_iter().take(WIDTH).enumerate() {
-        node.set_bounds(k, &b);
-        match c {
-            Child::Leaf { first, count } => {
-                node.child[k] = LEAF_BIT | first;
-                node.count[k] = count as u8;
-            }
-            Child::Inner(i) => node.child[k] = i,
+/// Fills slot `k` (below `WIDTH`) of a node, starting from [`Node::EMPTY`], with a child and
+/// its exact bounds (builders always fill all slots, see the size plan; missing ones stay
+/// empty). Builders fill a node as its children are built, so no list of them is kept.
+#[inline]
+pub fn set_child(node: &mut Node, k: usize, b: &Aabb, c: Child) {
+    let k = k & (WIDTH - 1);
+    node.set_bounds(k, b);
+    match c {
+        Child::Leaf { first, count } => {
+            node.child[k] = LEAF_BIT | first;
+            node.count[k] = count as u8;
         }
+        Child::Inner(i) => node.child[k] = i,
     }
-    node
 }
 
 /// A built tree: `root` covers every stored primitive (`None` when there are none); when it
