@@ -317,7 +317,8 @@ impl<'s> Level<'s> {
 const _: () = assert!(WIDTH == 8, "the node test is written for f32x8");
 
 /// Tests the children of node `index`: returns the nearest one the segment reaches, having
-/// pushed the others (farthest deepest), or `None` when it reaches none.
+/// pushed the others (farthest deepest), or `None` when it reaches none. `triangles` are the
+/// structure's triangles (empty when its leaves hold other primitives), for prefetching.
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
 pub(super) fn descend(
