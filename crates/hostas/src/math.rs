@@ -291,33 +291,32 @@ impl Affine {
     }
 }
 
+/// Cache hints: `safe_arch`'s prefetch instructions on x86 with SSE, nothing elsewhere.
+#[cfg(all(
+    any(target_arch = "x86", target_arch = "x86_64"),
+    target_feature = "sse"
+))]
+mod hint {
+    pub use safe_arch::{prefetch_et0 as for_write, prefetch_t0 as for_read};
+}
+#[cfg(not(all(
+    any(target_arch = "x86", target_arch = "x86_64"),
+    target_feature = "sse"
+)))]
+mod hint {
+    pub fn for_write<T>(_: &T) {}
+    pub fn for_read<T>(_: &T) {}
+}
+
 /// Asks the caches for the line holding `x`, about to be written: a hint for scattered writes
 /// whose addresses are known well ahead (no effect on any result).
 #[inline(always)]
 pub fn prefetch_for_write<T>(x: &T) {
-    #[cfg(all(
-        any(target_arch = "x86", target_arch = "x86_64"),
-        target_feature = "sse"
-    ))]
-    safe_arch::prefetch_et0(x);
-    #[cfg(not(all(
-        any(target_arch = "x86", target_arch = "x86_64"),
-        target_feature = "sse"
-    )))]
-    let _ = x;
+    hint::for_write(x);
 }
 
 /// Asks the caches for the line holding `x`, about to be read (a hint; no effect on results).
 #[inline(always)]
 pub fn prefetch<T>(x: &T) {
-    #[cfg(all(
-        any(target_arch = "x86", target_arch = "x86_64"),
-        target_feature = "sse"
-    ))]
-    safe_arch::prefetch_t0(x);
-    #[cfg(not(all(
-        any(target_arch = "x86", target_arch = "x86_64"),
-        target_feature = "sse"
-    )))]
-    let _ = x;
+    hint::for_read(x);
 }

@@ -504,16 +504,20 @@ impl Ctx<'_> {
 mod tests {
     use super::*;
 
-    /// Split points found in `delta` are those of a binary search.
-    #[test]
-    fn delta_splits() {
-        let mut seed = 0x1234_5678u32;
-        let mut rnd = move || {
+    /// A small deterministic generator (xorshift32).
+    fn xorshift(mut seed: u32) -> impl FnMut() -> u32 {
+        move || {
             seed ^= seed << 13;
             seed ^= seed >> 17;
             seed ^= seed << 5;
             seed
-        };
+        }
+    }
+
+    /// Split points found in `delta` are those of a binary search.
+    #[test]
+    fn delta_splits() {
+        let mut rnd = xorshift(0x1234_5678);
         // (Past one chunk of the parallel pass.)
         let n = CHUNK + 5000;
         // Few distinct codes in places, so that equal neighbours occur.
@@ -542,13 +546,7 @@ mod tests {
     /// Both sorts (from the top digit, from the lowest) give the keys in order.
     #[test]
     fn radix_sorts_sort() {
-        let mut seed = 0x2545_f491u32;
-        let mut rnd = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 17;
-            seed ^= seed << 5;
-            seed
-        };
+        let mut rnd = xorshift(0x2545_f491);
         for (n, clustered) in [(1000, false), (MSD_MIN + 5, false), (MSD_MIN + 5, true)] {
             let keys: Vec<u64> = (0..n)
                 .map(|i| {

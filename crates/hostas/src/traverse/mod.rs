@@ -15,6 +15,7 @@ pub use scene::{Hit, HitKind, Scene};
 pub use tracer::Tracer;
 
 use crate::error::{Error, Location, Result};
+use crate::layout::PrimKind;
 use crate::math::Vec3;
 
 /// SPIR-V `RayFlags` (`gl_RayFlags*EXT`).
@@ -45,6 +46,19 @@ impl RayFlags {
     #[inline(always)]
     pub const fn intersects(self, other: RayFlags) -> bool {
         self.0 & other.0 != 0
+    }
+}
+
+impl RayFlags {
+    /// Whether these flags skip a bottom level holding `kind` of primitive (`SKIP_TRIANGLES`,
+    /// `SKIP_AABBS`); a bottom level without triangles or AABBs is never entered.
+    #[inline(always)]
+    pub(crate) fn skip(self, kind: PrimKind) -> bool {
+        match kind {
+            PrimKind::Triangles => self.contains(RayFlags::SKIP_TRIANGLES),
+            PrimKind::Aabbs => self.contains(RayFlags::SKIP_AABBS),
+            _ => true,
+        }
     }
 }
 

@@ -698,12 +698,7 @@ impl<'s> RayQuery<'s> {
                 let Some(view) = self.scene.blas_view_for(slot) else {
                     continue;
                 };
-                let skip = match view.prim_kind {
-                    PrimKind::Triangles => flags.contains(RayFlags::SKIP_TRIANGLES),
-                    PrimKind::Aabbs => flags.contains(RayFlags::SKIP_AABBS),
-                    _ => true,
-                };
-                if skip || view.nodes.is_empty() {
+                if flags.skip(view.prim_kind) || view.nodes.is_empty() {
                     continue;
                 }
                 let w2o = Affine::from_rows(inst.world_to_object);

@@ -40,8 +40,6 @@ struct Direct<'s> {
     view: View<'s>,
     inst: &'s InstanceRecord,
     blas: u32,
-    /// The ray flag that skips the bottom level's kind of primitive.
-    skip: RayFlags,
 }
 
 impl<'s> Direct<'s> {
@@ -54,17 +52,11 @@ impl<'s> Direct<'s> {
         }
         let blas = scene.instance_blas_index(0)?;
         let view = scene.blas_view(blas)?;
-        let skip = match view.prim_kind {
-            PrimKind::Triangles => RayFlags::SKIP_TRIANGLES,
-            PrimKind::Aabbs => RayFlags::SKIP_AABBS,
-            _ => return None,
-        };
-        (!view.nodes.is_empty()).then_some(Direct {
-            view,
-            inst,
-            blas,
-            skip,
-        })
+        // Only bottom levels some ray enters (triangles or AABBs) go direct.
+        if RayFlags::NONE.skip(view.prim_kind) {
+            return None;
+        }
+        (!view.nodes.is_empty()).then_some(Direct { view, inst, blas })
     }
 }
 
@@ -142,7 +134,7 @@ impl<'s> Tracer<'s> {
             front_face: false,
         };
         if let Some(d) = &self.direct {
-            if d.inst.mask & ray.cull_mask & 0xff != 0 && !ray.flags.contains(d.skip) {
+            if d.inst.mask & ray.cull_mask & 0xff != 0 && !ray.flags.skip(d.view.prim_kind) {
                 let boxes = BoxRay::new(ray.origin, ray.direction);
                 let at = BlasAt {
                     view: &d.view,
@@ -279,12 +271,7 @@ fn enter<'s>(
     let Some((_, view)) = cached else {
         return false;
     };
-    let skip = match view.prim_kind {
-        PrimKind::Triangles => ray.flags.contains(RayFlags::SKIP_TRIANGLES),
-        PrimKind::Aabbs => ray.flags.contains(RayFlags::SKIP_AABBS),
-        _ => true,
-    };
-    if skip || view.nodes.is_empty() {
+    if ray.flags.skip(view.prim_kind) || view.nodes.is_empty() {
         return false;
     }
     // An identity instance sees the world ray: no transform, no new inverses, nothing copied.
