@@ -292,6 +292,8 @@ fn enter<'s>(
 }
 
 /// [`trace_blas`] for the axis permutation of the ray (`local`: in the instance's space).
+/// The root's children are tested first: a ray that reaches none of them (most rays that miss
+/// the structure) is done before it is prepared for triangles and the loop is entered.
 #[inline(always)]
 fn walk_blas(
     stack: &mut [Entry],
@@ -302,14 +304,38 @@ fn walk_blas(
     best: &mut Best,
     first_hit: bool,
 ) -> bool {
+    let mut sp = base;
+    let view = at.view;
+    let Some(cur) = descend(
+        stack,
+        &mut sp,
+        view.nodes,
+        view.triangles,
+        0,
+        local,
+        ray.t_min,
+        best.t,
+    ) else {
+        return false;
+    };
+    let walk = Walk { base, sp, cur };
     match permutation(local.direction) {
-        0 => trace_blas::<0>(stack, base, at, local, ray, best, first_hit),
-        1 => trace_blas::<1>(stack, base, at, local, ray, best, first_hit),
-        2 => trace_blas::<2>(stack, base, at, local, ray, best, first_hit),
-        3 => trace_blas::<3>(stack, base, at, local, ray, best, first_hit),
-        4 => trace_blas::<4>(stack, base, at, local, ray, best, first_hit),
-        _ => trace_blas::<5>(stack, base, at, local, ray, best, first_hit),
+        0 => trace_blas::<0>(stack, walk, at, local, ray, best, first_hit),
+        1 => trace_blas::<1>(stack, walk, at, local, ray, best, first_hit),
+        2 => trace_blas::<2>(stack, walk, at, local, ray, best, first_hit),
+        3 => trace_blas::<3>(stack, walk, at, local, ray, best, first_hit),
+        4 => trace_blas::<4>(stack, walk, at, local, ray, best, first_hit),
+        _ => trace_blas::<5>(stack, walk, at, local, ray, best, first_hit),
     }
+}
+
+/// Where a bottom-level walk stands: its entries lie above `base` up to `sp`, and `cur` is
+/// the child to visit next.
+#[derive(Clone, Copy)]
+struct Walk {
+    base: usize,
+    sp: usize,
+    cur: Entry,
 }
 
 /// Pops the nearest entry above `base` that may still hold a hit nearer than `t_max`.
@@ -333,15 +359,15 @@ struct BlasAt<'a, 's> {
     blas: u32,
 }
 
-/// Traverses one instance's bottom-level structure on top of `stack` (entries above `base`),
-/// updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
+/// Continues the walk of one instance's bottom-level structure (its entries on `stack` above
+/// `walk.base`), updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
 /// of the ray (`permutation(boxes.direction) == P`), so that preparing the ray for the
 /// triangle test and the test itself index nothing at run time. Not inlined: the
 /// bottom-level loop is the hot one and gets the registers to itself.
 #[inline(never)]
 fn trace_blas<const P: usize>(
     stack: &mut [Entry],
-    base: usize,
+    walk: Walk,
     at: &BlasAt,
     boxes: &BoxRay,
     ray: &Ray,
@@ -371,13 +397,12 @@ fn trace_blas<const P: usize>(
         let (g, _) = view.locate(id);
         opacity_culled(resolve_opacity(view, g, inst, flags), flags)
     };
-    let mut sp = base;
+    let Walk {
+        base,
+        mut sp,
+        mut cur,
+    } = walk;
     let mut found = false;
-    let mut cur = Entry {
-        child: 0,
-        count: 0,
-        t: f32::NEG_INFINITY,
-    };
     loop {
         if cur.child & LEAF_BIT == 0 {
             if let Some(next) = descend(
