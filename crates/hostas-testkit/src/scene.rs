@@ -169,12 +169,9 @@ fn geometry<'a>(g: &GeometryDesc, b: &'a GeometryBytes) -> Geometry<'a> {
 }
 
 impl BlasDesc {
-    /// Builds (mode BUILD) with `flags` into a new structure.
-    pub fn build(
-        &self,
-        device: &Device,
-        flags: vk::BuildAccelerationStructureFlagsKHR,
-    ) -> hostas::Result<AccelerationStructure> {
+    /// Calls `f` with the geometries and ranges an application would pass to Vulkan for this
+    /// description (one range per geometry, every primitive).
+    pub fn with_inputs<R>(&self, f: impl FnOnce(&[Geometry], &[BuildRangeInfo]) -> R) -> R {
         let bytes: Vec<GeometryBytes> = self.geometries.iter().map(geometry_bytes).collect();
         let geoms: Vec<Geometry> = self
             .geometries
@@ -190,13 +187,24 @@ impl BlasDesc {
                 ..Default::default()
             })
             .collect();
-        hostas::quick::build(
-            device,
-            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
-            flags,
-            &geoms,
-            &ranges,
-        )
+        f(&geoms, &ranges)
+    }
+
+    /// Builds (mode BUILD) with `flags` into a new structure.
+    pub fn build(
+        &self,
+        device: &Device,
+        flags: vk::BuildAccelerationStructureFlagsKHR,
+    ) -> hostas::Result<AccelerationStructure> {
+        self.with_inputs(|geoms, ranges| {
+            hostas::quick::build(
+                device,
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                flags,
+                geoms,
+                ranges,
+            )
+        })
     }
 
     /// Updates `src` into `dst` (which may be `src`) with this description's data.
@@ -207,36 +215,23 @@ impl BlasDesc {
         src: AccelerationStructure,
         dst: AccelerationStructure,
     ) -> hostas::Result<()> {
-        let bytes: Vec<GeometryBytes> = self.geometries.iter().map(geometry_bytes).collect();
-        let geoms: Vec<Geometry> = self
-            .geometries
-            .iter()
-            .zip(&bytes)
-            .map(|(g, b)| geometry(g, b))
-            .collect();
-        let ranges: Vec<BuildRangeInfo> = self
-            .geometries
-            .iter()
-            .map(|g| BuildRangeInfo {
-                primitive_count: g.primitive_count(),
-                ..Default::default()
-            })
-            .collect();
-        let counts: Vec<u32> = ranges.iter().map(|r| r.primitive_count).collect();
-        let mut info = BuildGeometryInfo {
-            ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
-            flags,
-            mode: vk::BuildAccelerationStructureModeKHR::UPDATE,
-            src: Some(src),
-            dst: Some(dst),
-            geometries: &geoms,
-            scratch: None,
-        };
-        let sizes =
-            device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &info, &counts)?;
-        let mut scratch = vec![0u8; sizes.update_scratch_size as usize];
-        info.scratch = Some(&mut scratch);
-        device.build_acceleration_structures(&mut [info], &[&ranges])
+        self.with_inputs(|geoms, ranges| {
+            let counts: Vec<u32> = ranges.iter().map(|r| r.primitive_count).collect();
+            let mut info = BuildGeometryInfo {
+                ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                flags,
+                mode: vk::BuildAccelerationStructureModeKHR::UPDATE,
+                src: Some(src),
+                dst: Some(dst),
+                geometries: geoms,
+                scratch: None,
+            };
+            let sizes =
+                device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &info, &counts)?;
+            let mut scratch = vec![0u8; sizes.update_scratch_size as usize];
+            info.scratch = Some(&mut scratch);
+            device.build_acceleration_structures(&mut [info], &[ranges])
+        })
     }
 }
 

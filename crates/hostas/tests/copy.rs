@@ -421,3 +421,143 @@ fn corrupted_serialized_data_never_panics() {
         "some corruptions (in float payload bytes) are harmless"
     );
 }
+
+/// Builds `geometries` into a structure placed at offset 256 of a buffer whose memory, and
+/// the scratch, hold stale bytes (as reused application memory would): the serialized
+/// structure must not depend on them.
+fn build_over_stale_memory(
+    device: &Device,
+    ty: vk::AccelerationStructureTypeKHR,
+    flags: vk::BuildAccelerationStructureFlagsKHR,
+    geometries: &[hostas::Geometry],
+    ranges: &[hostas::BuildRangeInfo],
+    stale: u8,
+) -> Vec<u8> {
+    let counts: Vec<u32> = ranges.iter().map(|r| r.primitive_count).collect();
+    let probe = hostas::BuildGeometryInfo {
+        ty,
+        flags,
+        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
+        src: None,
+        dst: None,
+        geometries,
+        scratch: None,
+    };
+    let sizes = device
+        .build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts)
+        .unwrap();
+    let size = sizes.acceleration_structure_size;
+    let buffer = hostas::Buffer::new(size + 512).unwrap();
+    buffer
+        .write(0, &vec![stale; (size + 512) as usize])
+        .unwrap();
+    let dst = device
+        .create_acceleration_structure(&AccelerationStructureCreateInfo {
+            buffer: Some(buffer),
+            offset: 256,
+            ..AccelerationStructureCreateInfo::new(ty, size)
+        })
+        .unwrap();
+    let mut scratch = vec![stale; sizes.build_scratch_size as usize];
+    let info = hostas::BuildGeometryInfo::build(ty, flags, geometries, dst, &mut scratch);
+    device
+        .build_acceleration_structures(&mut [info], &[ranges])
+        .unwrap();
+    let bytes = device.serialize(dst).unwrap();
+    device.destroy_acceleration_structure(dst).unwrap();
+    bytes
+}
+
+#[test]
+fn builds_do_not_depend_on_stale_memory() {
+    use vk::BuildAccelerationStructureFlagsKHR as F;
+    const BLAS: vk::AccelerationStructureTypeKHR = vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL;
+    let mut r = generate::rng(7);
+    let (pos, idx) = generate::uv_sphere(70);
+    let sphere = hostas::quick::triangle_mesh(&pos, &idx, vk::GeometryFlagsKHR::OPAQUE);
+    let soup = generate::random_triangles(&mut r, 3000, true);
+    let boxes = generate::random_boxes(&mut r, 3000, true);
+    let blas = |g: &hostas_testkit::GeometryDesc| hostas_testkit::BlasDesc {
+        geometries: vec![g.clone()],
+    };
+    let device = Device::new();
+    for preset in [
+        F::PREFER_FAST_TRACE,
+        F::PREFER_FAST_BUILD,
+        F::empty(),
+        F::LOW_MEMORY,
+    ] {
+        for flags in [preset, preset | F::ALLOW_UPDATE | F::ALLOW_COMPACTION] {
+            let ranges = [hostas::BuildRangeInfo {
+                primitive_count: idx.len() as u32,
+                ..Default::default()
+            }];
+            let [a, b] = [0x00, 0xa5].map(|stale| {
+                build_over_stale_memory(&device, BLAS, flags, &[sphere], &ranges, stale)
+            });
+            assert!(a == b, "sphere, {flags:?}: bytes depend on stale memory");
+            for g in [&soup, &boxes] {
+                let [a, b] = [0x00, 0x5a].map(|stale| {
+                    blas(g).with_inputs(|geoms, ranges| {
+                        build_over_stale_memory(&device, BLAS, flags, geoms, ranges, stale)
+                    })
+                });
+                assert!(a == b, "{flags:?}: bytes depend on stale memory");
+            }
+        }
+    }
+    // A top level over three instances of one bottom level, one of them inactive.
+    let blas = hostas::quick::build_triangle_blas(&device, &pos, &idx, F::empty()).unwrap();
+    let mut instances: Vec<_> = (0..3)
+        .map(|k| hostas::quick::instance(blas, generate::random_transform(&mut r, true)))
+        .collect();
+    instances[1].acceleration_structure_reference = 0;
+    let bytes: Vec<u8> = instances.iter().flat_map(|i| i.encode()).collect();
+    let tlas = [hostas::Geometry::instances(
+        hostas::InstancesData::Array(&bytes),
+        vk::GeometryFlagsKHR::empty(),
+    )];
+    let ranges = [hostas::BuildRangeInfo {
+        primitive_count: 3,
+        ..Default::default()
+    }];
+    let ty = vk::AccelerationStructureTypeKHR::TOP_LEVEL;
+    let [a, b] = [0x00, 0xff]
+        .map(|stale| build_over_stale_memory(&device, ty, F::empty(), &tlas, &ranges, stale));
+    assert!(a == b, "top level: bytes depend on stale memory");
+}
+
+#[test]
+fn updates_into_another_structure_do_not_depend_on_stale_memory() {
+    use vk::BuildAccelerationStructureFlagsKHR as F;
+    let ty = vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL;
+    let flags = F::ALLOW_UPDATE;
+    let mut r = generate::rng(11);
+    let desc = hostas_testkit::BlasDesc {
+        geometries: vec![generate::random_triangles(&mut r, 2000, true)],
+    };
+    let device = Device::new();
+    let src = desc.build(&device, flags).unwrap();
+    let size = device
+        .acceleration_structure_property(src, vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR)
+        .unwrap();
+    let [a, b] = [0x00, 0xa5].map(|stale| {
+        let buffer = hostas::Buffer::new(size + 256).unwrap();
+        buffer
+            .write(0, &vec![stale; (size + 256) as usize])
+            .unwrap();
+        let dst = device
+            .create_acceleration_structure(&AccelerationStructureCreateInfo {
+                buffer: Some(buffer),
+                offset: 256,
+                ..AccelerationStructureCreateInfo::new(ty, size)
+            })
+            .unwrap();
+        desc.update(&device, flags, src, dst).unwrap();
+        device.serialize(dst).unwrap()
+    });
+    assert!(
+        a == b,
+        "bytes of an update depend on the destination's stale memory"
+    );
+}

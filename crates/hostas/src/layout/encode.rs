@@ -71,6 +71,7 @@ pub fn encode(
         ..plan.geometries_offset as usize
             + super::GEOMETRY_RECORD_SIZE as usize * geometries.len()];
     g_bytes.copy_from_slice(bytemuck::cast_slice(geometries));
+    zero_gaps(dst, plan, fields, geometries.len() as u64)?;
 
     let nodes = node_section(dst, plan)?;
     let root_area = match &tree.root {
@@ -131,6 +132,30 @@ pub fn encode(
     };
     dst[..HEADER_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&header));
     Ok(header)
+}
+
+/// Zeroes the bytes before the node section that no section holds: the alignment gaps after
+/// the geometry records, the primitives and the ids, and the room left by primitives that are
+/// not stored (inactive ones). The structure's bytes (serialized, compacted) must not depend
+/// on what its memory held before the build.
+fn zero_gaps(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: u64) -> Result<()> {
+    let stored = u64::from(fields.stored_count);
+    let prim_size =
+        super::PrimKind::from_raw(fields.prim_kind).map_or(0, super::PrimKind::prim_size);
+    let gaps = [
+        (
+            plan.geometries_offset + super::GEOMETRY_RECORD_SIZE * geometries,
+            plan.prims_offset,
+        ),
+        (plan.prims_offset + prim_size * stored, plan.prim_ids_offset),
+        (plan.prim_ids_offset + 4 * stored, plan.nodes_offset),
+    ];
+    for (start, end) in gaps {
+        dst.get_mut(start as usize..end as usize)
+            .ok_or_else(|| Error::OutOfHostMemory("structure smaller than its plan".into()))?
+            .fill(0);
+    }
+    Ok(())
 }
 
 /// The inner children of a node.
