@@ -509,7 +509,7 @@ fn builds_do_not_depend_on_stale_memory() {
     // A top level over three instances of one bottom level, one of them inactive.
     let blas = hostas::quick::build_triangle_blas(&device, &pos, &idx, F::empty()).unwrap();
     let mut instances: Vec<_> = (0..3)
-        .map(|k| hostas::quick::instance(blas, generate::random_transform(&mut r, true)))
+        .map(|_| hostas::quick::instance(blas, generate::random_transform(&mut r, true)))
         .collect();
     instances[1].acceleration_structure_reference = 0;
     let bytes: Vec<u8> = instances.iter().flat_map(|i| i.encode()).collect();
