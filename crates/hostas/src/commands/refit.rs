@@ -690,48 +690,71 @@ fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     prims: &mut [[f32; 9]],
     slot: &mut [u32],
 ) -> Option<()> {
-    const NONE: u32 = u32::MAX;
     // Both loops write at random (a soup's leaves are scattered over primitive order). With
     // `AHEAD` (structures larger than the caches), the lines they will write are requested
-    // this many iterations ahead, so that the misses overlap instead of following one another.
+    // this many iterations ahead, so that the misses overlap instead of following one another;
+    // the last iterations, with nothing left to request, run in a loop of their own.
     const SLOTS_AHEAD: usize = 32;
-    const PRIMS_AHEAD: usize = 16;
+    const PRIMS_AHEAD: usize = 64;
+    let first = d.first;
     slot.fill(NONE);
-    for (s, &id) in ids.iter().enumerate() {
-        if AHEAD {
-            if let Some(&ahead) = ids.get(s + SLOTS_AHEAD) {
-                if let Some(x) = slot.get(ahead.wrapping_sub(d.first) as usize) {
-                    prefetch_for_write(x);
-                }
-            }
+    let ahead_len = |len: usize, ahead: usize| if AHEAD { len.saturating_sub(ahead) } else { 0 };
+    let (head, tail) = ids.split_at(ahead_len(ids.len(), SLOTS_AHEAD));
+    let later = ids.get(SLOTS_AHEAD..).unwrap_or(&[]);
+    for (s, (&id, &ahead)) in head.iter().zip(later).enumerate() {
+        if let Some(x) = slot.get(ahead.wrapping_sub(first) as usize) {
+            prefetch_for_write(x);
         }
-        *slot.get_mut(id.wrapping_sub(d.first) as usize)? = s as u32;
+        *slot.get_mut(id.wrapping_sub(first) as usize)? = s as u32;
+    }
+    for (s, &id) in (head.len()..).zip(tail) {
+        *slot.get_mut(id.wrapping_sub(first) as usize)? = s as u32;
     }
     // Distinct ids fill as many slots as there are ids.
-    let mut written = 0;
+    let mut empty = 0;
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
-    for (p, (&s, t)) in slot.iter().zip(d.index.triples()).enumerate() {
-        if AHEAD {
-            if let Some(x) = slot
-                .get(p + PRIMS_AHEAD)
-                .and_then(|&a| prims.get(a as usize))
-            {
-                prefetch_for_write(x);
-            }
+    let (head, tail) = slot.split_at(ahead_len(slot.len(), PRIMS_AHEAD));
+    let later = slot.get(PRIMS_AHEAD..).unwrap_or(&[]);
+    for ((&s, &ahead), t) in head.iter().zip(later).zip(d.index.triples()) {
+        if let Some(x) = prims.get(ahead as usize) {
+            // (Both ends: a triangle may straddle two lines.)
+            prefetch_for_write(&x[0]);
+            prefetch_for_write(&x[8]);
         }
-        if s != NONE {
-            let a = d.verts.get(t[0])?;
-            let b = d.verts.get(t[1])?;
-            let c = d.verts.get(t[2])?;
-            if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
-                return None;
-            }
-            *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-            written += 1;
+        if s == NONE {
+            empty += 1;
+        } else {
+            d.put(t, s, prims)?;
         }
     }
-    (written == ids.len()).then_some(())
+    for (&s, t) in tail.iter().zip(d.index.triples().skip(head.len())) {
+        if s == NONE {
+            empty += 1;
+        } else {
+            d.put(t, s, prims)?;
+        }
+    }
+    (slot.len() - empty == ids.len()).then_some(())
+}
+
+/// A slot that holds no stored primitive.
+const NONE: u32 = u32::MAX;
+
+impl<I: Indices, V: Vertices> TriF32<I, V> {
+    /// Writes the triangle with vertices `t` to stored slot `s`; `None` if it is not valid
+    /// (or `s` out of range).
+    #[inline(always)]
+    fn put(&self, t: [usize; 3], s: u32, prims: &mut [[f32; 9]]) -> Option<()> {
+        let a = self.verts.get(t[0])?;
+        let b = self.verts.get(t[1])?;
+        let c = self.verts.get(t[2])?;
+        if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
+            return None;
+        }
+        *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+        Some(())
+    }
 }
 
 /// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
