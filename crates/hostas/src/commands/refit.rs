@@ -165,12 +165,10 @@ fn lanes(b: Box4) -> Lanes {
 impl StoredPrim for [f32; 9] {
     #[inline(always)]
     fn leaf_box(prims: &[[f32; 9]]) -> Lanes {
-        let mut g = Box4::EMPTY;
-        let mut rest = prims;
-        // (Not `for f in prims`: that computes a trip count, a division by 36, for each
-        // leaf of a few triangles.)
-        while let Some((f, tail)) = rest.split_first() {
-            rest = tail;
+        let Some(last) = prims.len().checked_sub(1) else {
+            return EMPTY_LANES;
+        };
+        let triangle = |f: &[f32; 9]| {
             // Each vertex from one 16-byte load (a box's lane 3 is unspecified, so the
             // neighbouring float may fill it): the same lanes 0-2, so the same bits as
             // `grow_triangle`.
@@ -179,7 +177,21 @@ impl StoredPrim for [f32; 9] {
             let a = f32x4::new(four(0));
             let b = f32x4::new(four(12));
             let c = f32x4::new([f[6], f[7], f[8], f[8]]);
-            g.grow(&Box4::triangle(a, b, c));
+            Box4::triangle(a, b, c)
+        };
+        // The first two triangles, then the next two, without a loop, the leaf's last
+        // triangle repeated where it has fewer: a union with a box already taken in changes
+        // no bit, and leaf sizes (mostly 1-4, in no predictable order) would otherwise cost
+        // a mispredicted loop exit per leaf.
+        let mut g = Box4::EMPTY;
+        g.grow(&triangle(&prims[0]));
+        g.grow(&triangle(&prims[1.min(last)]));
+        if last >= 2 {
+            g.grow(&triangle(&prims[2]));
+            g.grow(&triangle(&prims[3.min(last)]));
+            for f in prims.get(4..).unwrap_or_default() {
+                g.grow(&triangle(f));
+            }
         }
         lanes(g)
     }
@@ -690,48 +702,71 @@ fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     prims: &mut [[f32; 9]],
     slot: &mut [u32],
 ) -> Option<()> {
-    const NONE: u32 = u32::MAX;
     // Both loops write at random (a soup's leaves are scattered over primitive order). With
     // `AHEAD` (structures larger than the caches), the lines they will write are requested
-    // this many iterations ahead, so that the misses overlap instead of following one another.
+    // this many iterations ahead, so that the misses overlap instead of following one another;
+    // the last iterations, with nothing left to request, run in a loop of their own.
     const SLOTS_AHEAD: usize = 32;
-    const PRIMS_AHEAD: usize = 16;
+    const PRIMS_AHEAD: usize = 64;
+    let first = d.first;
     slot.fill(NONE);
-    for (s, &id) in ids.iter().enumerate() {
-        if AHEAD {
-            if let Some(&ahead) = ids.get(s + SLOTS_AHEAD) {
-                if let Some(x) = slot.get(ahead.wrapping_sub(d.first) as usize) {
-                    prefetch_for_write(x);
-                }
-            }
+    let ahead_len = |len: usize, ahead: usize| if AHEAD { len.saturating_sub(ahead) } else { 0 };
+    let (head, tail) = ids.split_at(ahead_len(ids.len(), SLOTS_AHEAD));
+    let later = ids.get(SLOTS_AHEAD..).unwrap_or(&[]);
+    for (s, (&id, &ahead)) in head.iter().zip(later).enumerate() {
+        if let Some(x) = slot.get(ahead.wrapping_sub(first) as usize) {
+            prefetch_for_write(x);
         }
-        *slot.get_mut(id.wrapping_sub(d.first) as usize)? = s as u32;
+        *slot.get_mut(id.wrapping_sub(first) as usize)? = s as u32;
+    }
+    for (s, &id) in (head.len()..).zip(tail) {
+        *slot.get_mut(id.wrapping_sub(first) as usize)? = s as u32;
     }
     // Distinct ids fill as many slots as there are ids.
-    let mut written = 0;
+    let mut empty = 0;
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
-    for (p, (&s, t)) in slot.iter().zip(d.index.triples()).enumerate() {
-        if AHEAD {
-            if let Some(x) = slot
-                .get(p + PRIMS_AHEAD)
-                .and_then(|&a| prims.get(a as usize))
-            {
-                prefetch_for_write(x);
-            }
+    let (head, tail) = slot.split_at(ahead_len(slot.len(), PRIMS_AHEAD));
+    let later = slot.get(PRIMS_AHEAD..).unwrap_or(&[]);
+    for ((&s, &ahead), t) in head.iter().zip(later).zip(d.index.triples()) {
+        if let Some(x) = prims.get(ahead as usize) {
+            // (Both ends: a triangle may straddle two lines.)
+            prefetch_for_write(&x[0]);
+            prefetch_for_write(&x[8]);
         }
-        if s != NONE {
-            let a = d.verts.get(t[0])?;
-            let b = d.verts.get(t[1])?;
-            let c = d.verts.get(t[2])?;
-            if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
-                return None;
-            }
-            *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-            written += 1;
+        if s == NONE {
+            empty += 1;
+        } else {
+            d.put(t, s, prims)?;
         }
     }
-    (written == ids.len()).then_some(())
+    for (&s, t) in tail.iter().zip(d.index.triples().skip(head.len())) {
+        if s == NONE {
+            empty += 1;
+        } else {
+            d.put(t, s, prims)?;
+        }
+    }
+    (slot.len() - empty == ids.len()).then_some(())
+}
+
+/// A slot that holds no stored primitive.
+const NONE: u32 = u32::MAX;
+
+impl<I: Indices, V: Vertices> TriF32<I, V> {
+    /// Writes the triangle with vertices `t` to stored slot `s`; `None` if it is not valid
+    /// (or `s` out of range).
+    #[inline(always)]
+    fn put(&self, t: [usize; 3], s: u32, prims: &mut [[f32; 9]]) -> Option<()> {
+        let a = self.verts.get(t[0])?;
+        let b = self.verts.get(t[1])?;
+        let c = self.verts.get(t[2])?;
+        if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
+            return None;
+        }
+        *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+        Some(())
+    }
 }
 
 /// The parts of a structure a refit touches: all nodes and primitives, or a subtree's.
