@@ -47,6 +47,16 @@ impl Box8 {
         let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(self.0);
         (lo, neg_hi)
     }
+    /// Grows to hold the point `p` given as `(p, -p)`, ignoring its NaN lanes (the point goes
+    /// first: the same bits as [`Box4::grow_point`]).
+    #[inline(always)]
+    fn grow_point(&mut self, p: f32x8) {
+        self.0 = fmin8(p, self.0);
+    }
+    fn box4(&self) -> Box4 {
+        let (lo, neg_hi) = self.halves();
+        Box4 { lo, hi: -neg_hi }
+    }
     /// The doubled centroid (lane 3 is meaningless).
     #[inline(always)]
     fn center2(&self) -> f32x4 {
@@ -409,19 +419,73 @@ fn bin_range<const N: usize>(bins: &mut Bins<N>, refs: &[PrimRef], binner: &Binn
     }
 }
 
+/// A split plane on axis `A`: a centroid is right of it when `c[A] >= t`, left otherwise (a
+/// NaN coordinate goes left, see [`Binner::threshold`]).
+#[derive(Clone, Copy)]
+struct Plane<const A: usize> {
+    t: f32x8,
+}
+
+impl<const A: usize> Plane<A> {
+    fn new(t: f32) -> Plane<A> {
+        Plane { t: f32x8::splat(t) }
+    }
+    /// A reference as one vector, its doubled centroid in both halves and the mask of the
+    /// side it goes to: all lanes set when right of the plane, none when left.
+    #[inline(always)]
+    fn classify(&self, r: &PrimRef) -> (f32x8, f32x8, f32x8) {
+        let v: f32x8 = bytemuck::cast(*r);
+        let [lo, hi]: [f32x4; 2] = bytemuck::cast(v);
+        let c2: f32x8 = v + f32x8::from(bytemuck::cast::<_, [f32; 8]>([hi, lo]));
+        let right = f32x8::splat(c2.to_array()[A]).simd_ge(self.t);
+        (v, c2, right)
+    }
+    #[inline(always)]
+    fn left_of(&self, r: &PrimRef) -> bool {
+        self.classify(r).2.to_bitmask() == 0
+    }
+}
+
+/// The centroid bounds of both sides of a plane as boxes `(lo, -hi)` ([`Box8`]), grown in
+/// registers without branching: each side grows by the centroid with all lanes made NaN when
+/// it is on the other side, which [`Box8::grow_point`] ignores (as it ignores a NaN lane of the
+/// centroid itself).
+#[derive(Clone, Copy)]
+struct SideBounds {
+    left: Box8,
+    right: Box8,
+}
+
+impl SideBounds {
+    const EMPTY: SideBounds = SideBounds {
+        left: Box8::EMPTY,
+        right: Box8::EMPTY,
+    };
+    /// Grows the side of `right` by the centroid given in both halves.
+    #[inline(always)]
+    fn grow(&mut self, c2: f32x8, right: f32x8) {
+        let p = c2 ^ NEG_HI;
+        self.left.grow_point(p | right);
+        self.right.grow_point(p | !right);
+    }
+    fn boxes(&self) -> (Box4, Box4) {
+        (self.left.box4(), self.right.box4())
+    }
+}
+
 /// Partitions a large range on all threads: count each chunk's left side, then scatter every
 /// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
 /// sequential stable partition, whatever the thread count. Returns the size of the left side
 /// and the centroid bounds of both sides.
-fn parallel_partition(
+fn parallel_partition<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
-    left_of: impl Fn(f32x4) -> bool + Sync,
+    plane: Plane<A>,
 ) -> (usize, Box4, Box4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
     let lefts: Vec<usize> = refs
         .par_chunks(CHUNK)
-        .map(|c| c.iter().filter(|r| left_of(center2(r))).count())
+        .map(|c| c.iter().filter(|r| plane.left_of(r)).count())
         .collect();
     let total_left: usize = lefts.iter().sum();
     // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
@@ -435,58 +499,56 @@ fn parallel_partition(
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<(Box4, Box4)> = refs
+    let infos: Vec<SideBounds> = refs
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
-            let (mut la, mut ra) = (Box4::EMPTY, Box4::EMPTY);
+            let mut sides = SideBounds::EMPTY;
             let (mut li, mut ri) = (0, 0);
             for r in c {
-                let c = center2(r);
-                if left_of(c) {
+                let (_, c2, right) = plane.classify(r);
+                sides.grow(c2, right);
+                if right.to_bitmask() == 0 {
                     lp[li] = *r;
                     li += 1;
-                    la.grow_point(c);
                 } else {
                     rp[ri] = *r;
                     ri += 1;
-                    ra.grow_point(c);
                 }
             }
-            (la, ra)
+            sides
         })
         .collect();
     refs.par_chunks_mut(CHUNK)
         .zip(aux.par_chunks(CHUNK))
         .for_each(|(d, s)| d.copy_from_slice(s));
-    let (mut l, mut r) = (Box4::EMPTY, Box4::EMPTY);
-    for (a, b) in &infos {
-        l.grow(a);
-        r.grow(b);
+    let mut all = SideBounds::EMPTY;
+    for s in &infos {
+        all.left.grow(&s.left);
+        all.right.grow(&s.right);
     }
+    let (l, r) = all.boxes();
     (total_left, l, r)
 }
 
 /// Stable partition through `aux` in one pass, given the size of the left side; `None` (with
 /// `refs` untouched) if `left` turns out not to be it.
-fn stable_partition(
+fn stable_partition<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     left: usize,
-    left_of: impl Fn(f32x4) -> bool,
+    plane: Plane<A>,
 ) -> Option<(usize, Box4, Box4)> {
     let aux = &mut aux[..refs.len()];
-    // Centroid bounds of the right side, then the left, indexed by the side (see `partition`).
-    let mut storage = [Box4::EMPTY; 2];
-    let acc = std::hint::black_box(&mut storage);
+    let mut sides = SideBounds::EMPTY;
     let (mut li, mut ri) = (0, left);
     for r in refs.iter() {
-        let c = center2(r);
-        let is_left = left_of(c);
-        acc[is_left as usize].grow_point(c);
+        let (v, c2, right) = plane.classify(r);
+        sides.grow(c2, right);
+        let is_left = right.to_bitmask() == 0;
         let at = if is_left { li } else { ri };
         if let Some(d) = aux.get_mut(at) {
-            *d = *r;
+            *d = bytemuck::cast(v);
         }
         li += is_left as usize;
         ri += !is_left as usize;
@@ -495,31 +557,51 @@ fn stable_partition(
         return None;
     }
     refs.copy_from_slice(aux);
-    Some((left, storage[1], storage[0]))
+    let (l, r) = sides.boxes();
+    Some((left, l, r))
 }
 
-/// Partitions `refs` in place into those with `left_of(centroid)` first; returns the size of
-/// the left side and the centroid bounds of both sides. Branch-free (Lomuto with an
-/// unconditional swap, bounds accumulated in an array indexed by the side): which side a
-/// primitive goes to is often a coin toss, and mispredicted branches cost more than the extra
-/// stores.
-fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, Box4, Box4) {
-    // Centroid bounds of the right side, then the left: indexed by the side, not branched on
-    // (kept in memory: as two registers, the compiler would branch again).
-    let mut storage = [Box4::EMPTY; 2];
-    let acc = std::hint::black_box(&mut storage);
+/// Partitions `refs` in place into those left of `plane` first; returns the size of the left
+/// side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
+/// swap, bounds grown with masks): which side a primitive goes to is often a coin toss, and
+/// mispredicted branches cost more than the extra stores.
+fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, Box4, Box4) {
+    let mut sides = SideBounds::EMPTY;
     let mut i = 0;
     for j in 0..refs.len() {
-        let r = refs[j];
-        let c = center2(&r);
-        let left = left_of(c);
-        acc[left as usize].grow_point(c);
+        let (v, c2, right) = plane.classify(&refs[j]);
+        sides.grow(c2, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
         refs[j] = refs[i];
-        refs[i] = r;
-        i += left as usize;
+        refs[i] = bytemuck::cast(v);
+        i += (right.to_bitmask() == 0) as usize;
     }
-    (i, storage[1], storage[0])
+    let (l, r) = sides.boxes();
+    (i, l, r)
+}
+
+/// Partitions a range by `plane` (through `aux` when large, stably), given the counts of the
+/// bins left of it. Returns the size of the left side and the centroid bounds of
+/// both sides.
+fn partition_by<const A: usize>(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    plane: Plane<A>,
+    left_counts: &[u32],
+) -> (usize, Box4, Box4) {
+    if refs.len() > PARALLEL_THRESHOLD * 16 {
+        // On one thread the bins' counts give the left side's size, so no counting pass.
+        // (Every stable partition is the same: the bytes do not depend on the path.)
+        let single = if rayon::current_num_threads() == 1 {
+            let counted: u32 = left_counts.iter().sum();
+            stable_partition(refs, aux, counted as usize, plane)
+        } else {
+            None
+        };
+        single.unwrap_or_else(|| parallel_partition(refs, aux, plane))
+    } else {
+        partition(refs, plane)
+    }
 }
 
 // Not inlined into `split`: see `sweep`.
@@ -533,30 +615,18 @@ fn binned_split_n<const N: usize>(
     let mut bins = Bins::<N>::new();
     bin_range(&mut bins, refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
-    // Left of the plane: `!(c >= t)` on the axis. The other lanes compare with NaN, which is
-    // never true, so the plane's side is whether the mask is empty.
+    // Left of the plane: `!(c >= t)` on the axis.
     let t = binner.threshold(
         axis,
         bin as u32,
         info.centroids.lo[axis],
         info.centroids.hi[axis],
     );
-    let mut tv = [f32::NAN; 4];
-    tv[axis & 3] = t;
-    let tv = f32x4::new(tv);
-    let left_of = |c: f32x4| c.simd_ge(tv).to_bitmask() == 0;
-    let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
-        // On one thread the bins' counts give the left side's size, so no counting pass.
-        // (Every stable partition is the same: the bytes do not depend on the path.)
-        let counted: u32 = bins.counts[axis][..bin].iter().sum();
-        let single = if rayon::current_num_threads() == 1 {
-            stable_partition(refs, aux, counted as usize, left_of)
-        } else {
-            None
-        };
-        single.unwrap_or_else(|| parallel_partition(refs, aux, left_of))
-    } else {
-        partition(refs, left_of)
+    let left_counts = &bins.counts[axis][..bin];
+    let (mid, cl, cr) = match axis {
+        0 => partition_by(refs, aux, Plane::<0>::new(t), left_counts),
+        1 => partition_by(refs, aux, Plane::<1>::new(t), left_counts),
+        _ => partition_by(refs, aux, Plane::<2>::new(t), left_counts),
     };
     if mid == 0 || mid == refs.len() {
         return None;
