@@ -189,8 +189,9 @@ struct Split {
 /// infinities) lands in some bin, masked into range by the caller.
 #[derive(Clone, Copy)]
 struct Binner {
-    lo: f32x4,
-    scale: f32x4,
+    /// The least centroid and the scale, in both halves (two centroids are binned at once).
+    lo: f32x8,
+    scale: f32x8,
     /// `scale` as scalars (axes without extent have 0).
     scales: [f32; 4],
 }
@@ -208,16 +209,24 @@ impl Binner {
                 0.0
             };
         }
+        let both = |x: [f32; 4]| f32x8::new(std::array::from_fn(|i| x[i % 4]));
         Binner {
-            lo: f32x4::new(lo),
-            scale: f32x4::new(scale),
+            lo: both(lo),
+            scale: both(scale),
             scales: scale,
         }
     }
-    /// The bin on each axis of a doubled centroid, before masking (lane 3 is meaningless).
+    /// The bins on each axis of two boxes' doubled centroids, as byte offsets into a [`Bins`]
+    /// axis (`bin << 5`, before masking): the first box's in lanes 0 to 2, the second's in
+    /// lanes 4 to 6.
     #[inline(always)]
-    fn bins(&self, c: f32x4) -> [u32; 4] {
-        bytemuck::cast(((c - self.lo) * self.scale).fast_trunc_int())
+    fn offsets2(&self, b0: &Box8, b1: &Box8) -> [u32; 8] {
+        let (lo0, neg_hi0) = b0.halves();
+        let (lo1, neg_hi1) = b1.halves();
+        let lo: f32x8 = bytemuck::cast([lo0, lo1]);
+        let neg_hi: f32x8 = bytemuck::cast([neg_hi0, neg_hi1]);
+        // The centroids as `Box8::center2` computes them.
+        bytemuck::cast(((lo - neg_hi - self.lo) * self.scale).fast_trunc_int() << 5)
     }
     /// The least centroid on `axis` whose bin is `bin` or more, given that the range's
     /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
@@ -274,28 +283,38 @@ impl Binner {
     }
 }
 
+/// A bin's primitive count, alone in 32 bytes: the stride of the bins' bounds, so that one
+/// byte offset (`bin << 5`, masked once) addresses both.
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct Count(u32);
+
 /// Per axis and bin: the bounds of the primitives whose centroid falls in it and their count.
 /// (Counts as `[bin][axis]` lanes ran 2-3 times slower here: the increments then share
 /// 16-byte words, which stalls the loads of the next primitive's bins.)
 struct Bins<const N: usize> {
     bounds: [[Box8; N]; 3],
-    counts: [[u32; N]; 3],
+    counts: [[Count; N]; 3],
 }
 
 impl<const N: usize> Bins<N> {
     fn new() -> Bins<N> {
         Bins {
             bounds: [[Box8::EMPTY; N]; 3],
-            counts: [[0; N]; 3],
+            counts: [[Count(0); N]; 3],
         }
     }
+    /// Adds a box to its bin on each axis, given as byte offsets (see [`Binner::offsets2`]).
     #[inline(always)]
-    fn add(&mut self, i: [u32; 4], b: &Box8) {
+    fn add(&mut self, at: &[u32], b: &Box8) {
         for k in 0..3 {
-            let j = i[k] as usize & (N - 1);
-            self.counts[k][j] += 1;
+            let j = (at[k] >> 5) as usize & (N - 1);
+            self.counts[k][j].0 += 1;
             self.bounds[k][j].grow(b);
         }
+    }
+    fn count(&self, axis: usize, bin: usize) -> u32 {
+        self.counts[axis][bin].0
     }
     fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
         // Neighbouring primitives often land in the same bins: alternating between two sets
@@ -306,25 +325,26 @@ impl<const N: usize> Bins<N> {
             let rest = pairs.remainder();
             for p in pairs {
                 let (b0, b1) = (Box8::of(&p[0]), Box8::of(&p[1]));
-                self.add(binner.bins(b0.center2()), &b0);
-                other.add(binner.bins(b1.center2()), &b1);
+                let at = binner.offsets2(&b0, &b1);
+                self.add(&at[..4], &b0);
+                other.add(&at[4..], &b1);
             }
             for r in rest {
                 let b = Box8::of(r);
-                self.add(binner.bins(b.center2()), &b);
+                self.add(&binner.offsets2(&b, &b), &b);
             }
             self.merge_from(&other);
             return;
         }
         for r in refs {
             let b = Box8::of(r);
-            self.add(binner.bins(b.center2()), &b);
+            self.add(&binner.offsets2(&b, &b), &b);
         }
     }
     fn merge_from(&mut self, b: &Bins<N>) {
         for k in 0..3 {
             for i in 0..N {
-                self.counts[k][i] += b.counts[k][i];
+                self.counts[k][i].0 += b.counts[k][i].0;
                 self.bounds[k][i].grow(&b.bounds[k][i]);
             }
         }
@@ -343,9 +363,9 @@ impl<const N: usize> Bins<N> {
         // turn. (Counts are below 2^31: as `i32` they convert to the same floats.)
         let counts = |i: usize| {
             i32x4::new([
-                self.counts[0][i] as i32,
-                self.counts[1][i] as i32,
-                self.counts[2][i] as i32,
+                self.count(0, i) as i32,
+                self.count(1, i) as i32,
+                self.count(2, i) as i32,
                 0,
             ])
         };
@@ -587,13 +607,13 @@ fn partition_by<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     plane: Plane<A>,
-    left_counts: &[u32],
+    left_counts: &[Count],
 ) -> (usize, Box4, Box4) {
     if refs.len() > PARALLEL_THRESHOLD * 16 {
         // On one thread the bins' counts give the left side's size, so no counting pass.
         // (Every stable partition is the same: the bytes do not depend on the path.)
         let single = if rayon::current_num_threads() == 1 {
-            let counted: u32 = left_counts.iter().sum();
+            let counted: u32 = left_counts.iter().map(|c| c.0).sum();
             stable_partition(refs, aux, counted as usize, plane)
         } else {
             None
