@@ -486,7 +486,8 @@ impl SideBounds {
     fn grow(&mut self, c2: f32x8, right: f32x8) {
         let p = c2 ^ NEG_HI;
         self.left.grow_point(p | right);
-        self.right.grow_point(p | !right);
+        self.right
+            .grow_point(right.select(p, f32x8::splat(f32::NAN)));
     }
     fn boxes(&self) -> (Box4, Box4) {
         (self.left.box4(), self.right.box4())
@@ -587,17 +588,19 @@ fn stable_partition<const A: usize>(
 /// mispredicted branches cost more than the extra stores.
 fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, Box4, Box4) {
     let mut sides = SideBounds::EMPTY;
-    let mut i = 0;
+    let mut i = 0u32;
     for j in 0..refs.len() {
         let (v, c2, right) = plane.classify(&refs[j]);
         sides.grow(c2, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
-        refs[j] = refs[i];
-        refs[i] = bytemuck::cast(v);
-        i += (right.to_bitmask() == 0) as usize;
+        refs[j] = refs[i as usize];
+        refs[i as usize] = bytemuck::cast(v);
+        // A set mask lane is -1 as an integer: `i` advances past a left reference only.
+        let right_lane: u32 = bytemuck::cast::<_, [u32; 8]>(right)[0];
+        i = i.wrapping_add(1).wrapping_add(right_lane);
     }
     let (l, r) = sides.boxes();
-    (i, l, r)
+    (i as usize, l, r)
 }
 
 /// Partitions a range by `plane` (through `aux` when large, stably), given the counts of the
