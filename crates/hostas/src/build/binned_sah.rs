@@ -466,6 +466,12 @@ impl<const A: usize> Plane<A> {
     }
 }
 
+/// The first lane of a mask as an integer: -1 when set, 0 when not.
+#[inline(always)]
+fn mask_lane(m: f32x8) -> i32 {
+    bytemuck::cast::<_, [i32; 8]>(m)[0]
+}
+
 /// The centroid bounds of both sides of a plane as boxes `(lo, -hi)` ([`Box8`]), grown in
 /// registers without branching: each side grows by the centroid with all lanes made NaN when
 /// it is on the other side, which [`Box8::grow_point`] ignores (as it ignores a NaN lane of the
@@ -566,13 +572,14 @@ fn stable_partition<const A: usize>(
     for r in refs.iter() {
         let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
-        let is_left = right.to_bitmask() == 0;
-        let at = if is_left { li } else { ri };
+        // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
+        let right_lane = mask_lane(right) as isize as usize;
+        let at = if right_lane == 0 { li } else { ri };
         if let Some(d) = aux.get_mut(at) {
             *d = bytemuck::cast(v);
         }
-        li += is_left as usize;
-        ri += !is_left as usize;
+        li = li.wrapping_add(1).wrapping_add(right_lane);
+        ri = ri.wrapping_sub(right_lane);
     }
     if li != left {
         return None;
@@ -595,9 +602,8 @@ fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, B
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
         refs[j] = refs[i as usize];
         refs[i as usize] = bytemuck::cast(v);
-        // A set mask lane is -1 as an integer: `i` advances past a left reference only.
-        let right_lane: u32 = bytemuck::cast::<_, [u32; 8]>(right)[0];
-        i = i.wrapping_add(1).wrapping_add(right_lane);
+        // `i` advances past a left reference only.
+        i = i.wrapping_add(1).wrapping_add(mask_lane(right) as u32);
     }
     let (l, r) = sides.boxes();
     (i as usize, l, r)
