@@ -1029,12 +1029,11 @@ fn build_child(
         }
         let Some(i) = pick else { break };
         let (begin, end) = ranges[i];
-        let parent = orders[i].take();
         let (s, lo, ro) = split(
             &mut refs[begin..end],
             &mut aux[begin..end],
             &infos[i],
-            parent.as_ref(),
+            orders[i].as_ref(),
             ctx,
             depth,
         );
