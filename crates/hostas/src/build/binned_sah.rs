@@ -47,6 +47,16 @@ impl Box8 {
         let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(self.0);
         (lo, neg_hi)
     }
+    /// Grows to hold the point `p` given as `(p, -p)`, ignoring its NaN lanes (the point goes
+    /// first: the same bits as [`Box4::grow_point`]).
+    #[inline(always)]
+    fn grow_point(&mut self, p: f32x8) {
+        self.0 = fmin8(p, self.0);
+    }
+    fn box4(&self) -> Box4 {
+        let (lo, neg_hi) = self.halves();
+        Box4 { lo, hi: -neg_hi }
+    }
     /// The doubled centroid (lane 3 is meaningless).
     #[inline(always)]
     fn center2(&self) -> f32x4 {
@@ -179,8 +189,9 @@ struct Split {
 /// infinities) lands in some bin, masked into range by the caller.
 #[derive(Clone, Copy)]
 struct Binner {
-    lo: f32x4,
-    scale: f32x4,
+    /// The least centroid and the scale, in both halves (two centroids are binned at once).
+    lo: f32x8,
+    scale: f32x8,
     /// `scale` as scalars (axes without extent have 0).
     scales: [f32; 4],
 }
@@ -198,16 +209,24 @@ impl Binner {
                 0.0
             };
         }
+        let both = |x: [f32; 4]| f32x8::new(std::array::from_fn(|i| x[i % 4]));
         Binner {
-            lo: f32x4::new(lo),
-            scale: f32x4::new(scale),
+            lo: both(lo),
+            scale: both(scale),
             scales: scale,
         }
     }
-    /// The bin on each axis of a doubled centroid, before masking (lane 3 is meaningless).
+    /// The bins on each axis of two boxes' doubled centroids, as byte offsets into a [`Bins`]
+    /// axis (`bin << 5`, before masking): the first box's in lanes 0 to 2, the second's in
+    /// lanes 4 to 6.
     #[inline(always)]
-    fn bins(&self, c: f32x4) -> [u32; 4] {
-        bytemuck::cast(((c - self.lo) * self.scale).fast_trunc_int())
+    fn offsets2(&self, b0: &Box8, b1: &Box8) -> [u32; 8] {
+        let (lo0, neg_hi0) = b0.halves();
+        let (lo1, neg_hi1) = b1.halves();
+        let lo: f32x8 = bytemuck::cast([lo0, lo1]);
+        let neg_hi: f32x8 = bytemuck::cast([neg_hi0, neg_hi1]);
+        // The centroids as `Box8::center2` computes them.
+        bytemuck::cast(((lo - neg_hi - self.lo) * self.scale).fast_trunc_int() << 5)
     }
     /// The least centroid on `axis` whose bin is `bin` or more, given that the range's
     /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
@@ -264,28 +283,41 @@ impl Binner {
     }
 }
 
+/// A bin's primitive count, alone in 32 bytes: the stride of the bins' bounds, so that one
+/// byte offset (`bin << 5`, masked once) addresses both.
+#[derive(Clone, Copy)]
+#[repr(C, align(32))]
+struct Count(u32);
+
 /// Per axis and bin: the bounds of the primitives whose centroid falls in it and their count.
 /// (Counts as `[bin][axis]` lanes ran 2-3 times slower here: the increments then share
 /// 16-byte words, which stalls the loads of the next primitive's bins.)
 struct Bins<const N: usize> {
     bounds: [[Box8; N]; 3],
-    counts: [[u32; N]; 3],
+    counts: [[Count; N]; 3],
 }
 
 impl<const N: usize> Bins<N> {
     fn new() -> Bins<N> {
+        // The empty box as a run-time value: the compiler then fills the bins with stores of
+        // one register instead of copying a constant array.
+        let empty = Box8(f32x8::splat(std::hint::black_box(f32::INFINITY)));
         Bins {
-            bounds: [[Box8::EMPTY; N]; 3],
-            counts: [[0; N]; 3],
+            bounds: [[empty; N]; 3],
+            counts: [[Count(0); N]; 3],
         }
     }
+    /// Adds a box to its bin on each axis, given as byte offsets (see [`Binner::offsets2`]).
     #[inline(always)]
-    fn add(&mut self, i: [u32; 4], b: &Box8) {
+    fn add(&mut self, at: &[u32], b: &Box8) {
         for k in 0..3 {
-            let j = i[k] as usize & (N - 1);
-            self.counts[k][j] += 1;
+            let j = (at[k] >> 5) as usize & (N - 1);
+            self.counts[k][j].0 += 1;
             self.bounds[k][j].grow(b);
         }
+    }
+    fn count(&self, axis: usize, bin: usize) -> u32 {
+        self.counts[axis][bin].0
     }
     fn fill(&mut self, binner: &Binner, refs: &[PrimRef]) {
         // Neighbouring primitives often land in the same bins: alternating between two sets
@@ -296,25 +328,26 @@ impl<const N: usize> Bins<N> {
             let rest = pairs.remainder();
             for p in pairs {
                 let (b0, b1) = (Box8::of(&p[0]), Box8::of(&p[1]));
-                self.add(binner.bins(b0.center2()), &b0);
-                other.add(binner.bins(b1.center2()), &b1);
+                let at = binner.offsets2(&b0, &b1);
+                self.add(&at[..4], &b0);
+                other.add(&at[4..], &b1);
             }
             for r in rest {
                 let b = Box8::of(r);
-                self.add(binner.bins(b.center2()), &b);
+                self.add(&binner.offsets2(&b, &b), &b);
             }
             self.merge_from(&other);
             return;
         }
         for r in refs {
             let b = Box8::of(r);
-            self.add(binner.bins(b.center2()), &b);
+            self.add(&binner.offsets2(&b, &b), &b);
         }
     }
     fn merge_from(&mut self, b: &Bins<N>) {
         for k in 0..3 {
             for i in 0..N {
-                self.counts[k][i] += b.counts[k][i];
+                self.counts[k][i].0 += b.counts[k][i].0;
                 self.bounds[k][i].grow(&b.bounds[k][i]);
             }
         }
@@ -333,9 +366,9 @@ impl<const N: usize> Bins<N> {
         // turn. (Counts are below 2^31: as `i32` they convert to the same floats.)
         let counts = |i: usize| {
             i32x4::new([
-                self.counts[0][i] as i32,
-                self.counts[1][i] as i32,
-                self.counts[2][i] as i32,
+                self.count(0, i) as i32,
+                self.count(1, i) as i32,
+                self.count(2, i) as i32,
                 0,
             ])
         };
@@ -409,19 +442,80 @@ fn bin_range<const N: usize>(bins: &mut Bins<N>, refs: &[PrimRef], binner: &Binn
     }
 }
 
+/// A split plane on axis `A`: a centroid is right of it when `c[A] >= t`, left otherwise (a
+/// NaN coordinate goes left, see [`Binner::threshold`]).
+#[derive(Clone, Copy)]
+struct Plane<const A: usize> {
+    t: f32x8,
+}
+
+impl<const A: usize> Plane<A> {
+    fn new(t: f32) -> Plane<A> {
+        Plane { t: f32x8::splat(t) }
+    }
+    /// A reference as one vector, its doubled centroid in both halves and the mask of the
+    /// side it goes to: all lanes set when right of the plane, none when left.
+    #[inline(always)]
+    fn classify(&self, r: &PrimRef) -> (f32x8, f32x8, f32x8) {
+        let v: f32x8 = bytemuck::cast(*r);
+        let [lo, hi]: [f32x4; 2] = bytemuck::cast(v);
+        let c2: f32x8 = v + f32x8::from(bytemuck::cast::<_, [f32; 8]>([hi, lo]));
+        let right = f32x8::splat(c2.to_array()[A]).simd_ge(self.t);
+        (v, c2, right)
+    }
+    #[inline(always)]
+    fn left_of(&self, r: &PrimRef) -> bool {
+        self.classify(r).2.to_bitmask() == 0
+    }
+}
+
+/// The first lane of a mask as an integer: -1 when set, 0 when not.
+#[inline(always)]
+fn mask_lane(m: f32x8) -> i32 {
+    bytemuck::cast::<_, [i32; 8]>(m)[0]
+}
+
+/// The centroid bounds of both sides of a plane as boxes `(lo, -hi)` ([`Box8`]), grown in
+/// registers without branching: each side grows by the centroid with all lanes made NaN when
+/// it is on the other side, which [`Box8::grow_point`] ignores (as it ignores a NaN lane of the
+/// centroid itself).
+#[derive(Clone, Copy)]
+struct SideBounds {
+    left: Box8,
+    right: Box8,
+}
+
+impl SideBounds {
+    const EMPTY: SideBounds = SideBounds {
+        left: Box8::EMPTY,
+        right: Box8::EMPTY,
+    };
+    /// Grows the side of `right` by the centroid given in both halves.
+    #[inline(always)]
+    fn grow(&mut self, c2: f32x8, right: f32x8) {
+        let p = c2 ^ NEG_HI;
+        self.left.grow_point(p | right);
+        self.right
+            .grow_point(right.select(p, f32x8::splat(f32::NAN)));
+    }
+    fn boxes(&self) -> (Box4, Box4) {
+        (self.left.box4(), self.right.box4())
+    }
+}
+
 /// Partitions a large range on all threads: count each chunk's left side, then scatter every
 /// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
 /// sequential stable partition, whatever the thread count. Returns the size of the left side
 /// and the centroid bounds of both sides.
-fn parallel_partition(
+fn parallel_partition<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
-    left_of: impl Fn(f32x4) -> bool + Sync,
+    plane: Plane<A>,
 ) -> (usize, Box4, Box4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
     let lefts: Vec<usize> = refs
         .par_chunks(CHUNK)
-        .map(|c| c.iter().filter(|r| left_of(center2(r))).count())
+        .map(|c| c.iter().filter(|r| plane.left_of(r)).count())
         .collect();
     let total_left: usize = lefts.iter().sum();
     // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
@@ -435,91 +529,111 @@ fn parallel_partition(
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<(Box4, Box4)> = refs
+    let infos: Vec<SideBounds> = refs
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
-            let (mut la, mut ra) = (Box4::EMPTY, Box4::EMPTY);
+            let mut sides = SideBounds::EMPTY;
             let (mut li, mut ri) = (0, 0);
             for r in c {
-                let c = center2(r);
-                if left_of(c) {
+                let (_, c2, right) = plane.classify(r);
+                sides.grow(c2, right);
+                if right.to_bitmask() == 0 {
                     lp[li] = *r;
                     li += 1;
-                    la.grow_point(c);
                 } else {
                     rp[ri] = *r;
                     ri += 1;
-                    ra.grow_point(c);
                 }
             }
-            (la, ra)
+            sides
         })
         .collect();
     refs.par_chunks_mut(CHUNK)
         .zip(aux.par_chunks(CHUNK))
         .for_each(|(d, s)| d.copy_from_slice(s));
-    let (mut l, mut r) = (Box4::EMPTY, Box4::EMPTY);
-    for (a, b) in &infos {
-        l.grow(a);
-        r.grow(b);
+    let mut all = SideBounds::EMPTY;
+    for s in &infos {
+        all.left.grow(&s.left);
+        all.right.grow(&s.right);
     }
+    let (l, r) = all.boxes();
     (total_left, l, r)
 }
 
 /// Stable partition through `aux` in one pass, given the size of the left side; `None` (with
 /// `refs` untouched) if `left` turns out not to be it.
-fn stable_partition(
+fn stable_partition<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     left: usize,
-    left_of: impl Fn(f32x4) -> bool,
+    plane: Plane<A>,
 ) -> Option<(usize, Box4, Box4)> {
     let aux = &mut aux[..refs.len()];
-    // Centroid bounds of the right side, then the left, indexed by the side (see `partition`).
-    let mut storage = [Box4::EMPTY; 2];
-    let acc = std::hint::black_box(&mut storage);
+    let mut sides = SideBounds::EMPTY;
     let (mut li, mut ri) = (0, left);
     for r in refs.iter() {
-        let c = center2(r);
-        let is_left = left_of(c);
-        acc[is_left as usize].grow_point(c);
-        let at = if is_left { li } else { ri };
+        let (v, c2, right) = plane.classify(r);
+        sides.grow(c2, right);
+        // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
+        let right_lane = mask_lane(right) as isize as usize;
+        let at = if right_lane == 0 { li } else { ri };
         if let Some(d) = aux.get_mut(at) {
-            *d = *r;
+            *d = bytemuck::cast(v);
         }
-        li += is_left as usize;
-        ri += !is_left as usize;
+        li = li.wrapping_add(1).wrapping_add(right_lane);
+        ri = ri.wrapping_sub(right_lane);
     }
     if li != left {
         return None;
     }
     refs.copy_from_slice(aux);
-    Some((left, storage[1], storage[0]))
+    let (l, r) = sides.boxes();
+    Some((left, l, r))
 }
 
-/// Partitions `refs` in place into those with `left_of(centroid)` first; returns the size of
-/// the left side and the centroid bounds of both sides. Branch-free (Lomuto with an
-/// unconditional swap, bounds accumulated in an array indexed by the side): which side a
-/// primitive goes to is often a coin toss, and mispredicted branches cost more than the extra
-/// stores.
-fn partition(refs: &mut [PrimRef], left_of: impl Fn(f32x4) -> bool) -> (usize, Box4, Box4) {
-    // Centroid bounds of the right side, then the left: indexed by the side, not branched on
-    // (kept in memory: as two registers, the compiler would branch again).
-    let mut storage = [Box4::EMPTY; 2];
-    let acc = std::hint::black_box(&mut storage);
-    let mut i = 0;
+/// Partitions `refs` in place into those left of `plane` first; returns the size of the left
+/// side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
+/// swap, bounds grown with masks): which side a primitive goes to is often a coin toss, and
+/// mispredicted branches cost more than the extra stores.
+fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, Box4, Box4) {
+    let mut sides = SideBounds::EMPTY;
+    let mut i = 0u32;
     for j in 0..refs.len() {
-        let r = refs[j];
-        let c = center2(&r);
-        let left = left_of(c);
-        acc[left as usize].grow_point(c);
+        let (v, c2, right) = plane.classify(&refs[j]);
+        sides.grow(c2, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
-        refs[j] = refs[i];
-        refs[i] = r;
-        i += left as usize;
+        refs[j] = refs[i as usize];
+        refs[i as usize] = bytemuck::cast(v);
+        // `i` advances past a left reference only.
+        i = i.wrapping_add(1).wrapping_add(mask_lane(right) as u32);
     }
-    (i, storage[1], storage[0])
+    let (l, r) = sides.boxes();
+    (i as usize, l, r)
+}
+
+/// Partitions a range by `plane` (through `aux` when large, stably), given the counts of the
+/// bins left of it. Returns the size of the left side and the centroid bounds of
+/// both sides.
+fn partition_by<const A: usize>(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    plane: Plane<A>,
+    left_counts: &[Count],
+) -> (usize, Box4, Box4) {
+    if refs.len() > PARALLEL_THRESHOLD * 16 {
+        // On one thread the bins' counts give the left side's size, so no counting pass.
+        // (Every stable partition is the same: the bytes do not depend on the path.)
+        let single = if rayon::current_num_threads() == 1 {
+            let counted: u32 = left_counts.iter().map(|c| c.0).sum();
+            stable_partition(refs, aux, counted as usize, plane)
+        } else {
+            None
+        };
+        single.unwrap_or_else(|| parallel_partition(refs, aux, plane))
+    } else {
+        partition(refs, plane)
+    }
 }
 
 // Not inlined into `split`: see `sweep`.
@@ -533,30 +647,18 @@ fn binned_split_n<const N: usize>(
     let mut bins = Bins::<N>::new();
     bin_range(&mut bins, refs, binner);
     let (axis, bin, cost) = bins.best(binner)?;
-    // Left of the plane: `!(c >= t)` on the axis. The other lanes compare with NaN, which is
-    // never true, so the plane's side is whether the mask is empty.
+    // Left of the plane: `!(c >= t)` on the axis.
     let t = binner.threshold(
         axis,
         bin as u32,
         info.centroids.lo[axis],
         info.centroids.hi[axis],
     );
-    let mut tv = [f32::NAN; 4];
-    tv[axis & 3] = t;
-    let tv = f32x4::new(tv);
-    let left_of = |c: f32x4| c.simd_ge(tv).to_bitmask() == 0;
-    let (mid, cl, cr) = if refs.len() > PARALLEL_THRESHOLD * 16 {
-        // On one thread the bins' counts give the left side's size, so no counting pass.
-        // (Every stable partition is the same: the bytes do not depend on the path.)
-        let counted: u32 = bins.counts[axis][..bin].iter().sum();
-        let single = if rayon::current_num_threads() == 1 {
-            stable_partition(refs, aux, counted as usize, left_of)
-        } else {
-            None
-        };
-        single.unwrap_or_else(|| parallel_partition(refs, aux, left_of))
-    } else {
-        partition(refs, left_of)
+    let left_counts = &bins.counts[axis][..bin];
+    let (mid, cl, cr) = match axis {
+        0 => partition_by(refs, aux, Plane::<0>::new(t), left_counts),
+        1 => partition_by(refs, aux, Plane::<1>::new(t), left_counts),
+        _ => partition_by(refs, aux, Plane::<2>::new(t), left_counts),
     };
     if mid == 0 || mid == refs.len() {
         return None;
@@ -799,6 +901,9 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
 
 /// Splits a range with at least two primitives; `orders` are the range's orders when a
 /// sweep split made it. Small ranges come back with the orders of both sides.
+// Inlined into `build_child`: the split and orders it returns then reach the parts without
+// going through a return slot.
+#[inline(always)]
 fn split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
@@ -927,12 +1032,11 @@ fn build_child(
         }
         let Some(i) = pick else { break };
         let (begin, end) = ranges[i];
-        let parent = orders[i].take();
         let (s, lo, ro) = split(
             &mut refs[begin..end],
             &mut aux[begin..end],
             &infos[i],
-            parent.as_ref(),
+            orders[i].as_ref(),
             ctx,
             depth,
         );
