@@ -11,7 +11,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{LEAF_BIT, Node, WIDTH};
 use crate::math::Box4;
 use rayon::prelude::*;
-use wide::{f32x4, f64x4, u8x32, u64x4};
+use wide::{f32x4, f64x4, u8x32, u32x8, u64x4};
 
 /// Spreads the low 10 bits of `v` to every third bit.
 const fn spread(v: u32) -> u32 {
@@ -417,40 +417,49 @@ impl Ctx<'_> {
             };
             return (leaf(keys, self.refs, dst), c);
         }
-        // The parts, in position order, by their ends (each starts where the previous ends).
-        let mut ends = [0usize; WIDTH];
-        ends[0] = n;
-        // When each part was made (a split's left half keeps its part's number).
-        let mut made = [0usize; WIDTH];
+        // The parts by when they were made (a split's left half keeps its part's number, the
+        // right half takes the next one): where each starts, which follows it in position
+        // order, and its split key `size * WIDTH + (WIDTH - 1 - number)`, 0 while unmade.
+        // The keys are distinct, so their maximum names the part to split next.
+        let mut start = [0usize; WIDTH];
+        let mut next = [0u8; WIDTH];
+        let mut key = u32x8::from([(n * WIDTH + WIDTH - 1) as u32, 0, 0, 0, 0, 0, 0, 0]);
+        let lanes = u32x8::from([0, 1, 2, 3, 4, 5, 6, 7]);
         let mut live = 1;
         while live < WIDTH {
             // Split the part with the most primitives (areas are not known top-down), the
             // first made among equals; parts of one primitive are never split.
-            let (mut i, mut best, mut b, mut s) = (0, 0, 0, 0);
-            for (j, &e) in ends[..live].iter().enumerate() {
-                let key = (e - s) * WIDTH + (WIDTH - 1 - made[j]);
-                if key > best {
-                    (i, best, b) = (j, key, s);
-                }
-                s = e;
-            }
+            let best = key.reduce_max() as usize;
             if best < 2 * WIDTH {
                 break;
             }
-            let e = ends[i];
+            let i = WIDTH - 1 - best % WIDTH;
+            let (b, size) = (start[i], best / WIDTH);
             let mid = if depth < MEDIAN_DEPTH {
-                split_point(&keys[b..e], base + b, self.top, self.delta)
+                split_point(&keys[b..b + size], base + b, self.top, self.delta)
             } else {
-                (e - b) / 2
-            };
-            // (A loop: `copy_within` is a call to memmove.)
-            for j in (i..live).rev() {
-                ends[j + 1] = ends[j];
-                made[j + 1] = made[j];
+                size / 2
             }
-            ends[i] = b + mid.clamp(1, e - b - 1);
-            made[i + 1] = live;
+            .clamp(1, size - 1);
+            start[live] = b + mid;
+            next[live] = next[i];
+            next[i] = live as u8;
+            let left = u32x8::splat((mid * WIDTH + WIDTH - 1 - i) as u32);
+            let right = u32x8::splat(((size - mid) * WIDTH + WIDTH - 1 - live) as u32);
+            key = lanes.simd_eq(u32x8::splat(i as u32)).bitselect(left, key);
+            key = lanes
+                .simd_eq(u32x8::splat(live as u32))
+                .bitselect(right, key);
             live += 1;
+        }
+        // The parts in position order, by their ends (each starts where the previous ends).
+        let key = key.to_array();
+        let mut ends = [0usize; WIDTH];
+        let (mut part, mut end) = (0, 0);
+        for e in &mut ends[..live] {
+            end += key[part] as usize / WIDTH;
+            *e = end;
+            part = next[part] as usize;
         }
         let me = out.reserve();
         let mut node = Node::EMPTY;
