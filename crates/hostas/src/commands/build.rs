@@ -805,25 +805,16 @@ fn decode_geometries(
                             .map_err(|_| internal("triangle slots"))?;
                         let first = first + base;
                         let (dead, cb) = match F32Tris::new(t) {
-                            Some(F32Tris::I0(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            Some(F32Tris::I0(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I2(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I4(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I0S(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I2S(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I4S(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            None => {
+                                let tris = (base..).map(|p| reader_tri(t, p));
+                                decode_tris(tris, t, base, first, outs, chunk_refs)
                             }
-                            Some(F32Tris::I2(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I4(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I0S(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I2S(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I4S(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            None => decode_tris(t, t, base, first, outs, chunk_refs),
                         }?;
                         (inactive, centroids) = (dead, cb);
                     }
@@ -872,27 +863,21 @@ fn decode_geometries(
     Ok((stored, centroids))
 }
 
-/// Triangles of one geometry as three vertices (lane 3 unspecified): `None` where the reader
-/// must decide (inactive, out of range, an unusual layout).
-trait TriSource {
-    fn get(&self, p: usize) -> Option<[f32x4; 3]>;
-}
-
 /// A vertex in lanes 0..3 (lane 3 zero).
 #[inline(always)]
 fn lanes(v: [f32; 3]) -> f32x4 {
     f32x4::from([v[0], v[1], v[2], 0.0])
 }
 
-impl TriSource for TriangleReader<'_> {
-    #[inline(always)]
-    fn get(&self, p: usize) -> Option<[f32x4; 3]> {
-        let f = self.triangle_fast(p as u32)?;
-        if f[0].is_nan() || f[3].is_nan() || f[6].is_nan() {
-            return None;
-        }
-        Some([0, 3, 6].map(|k| lanes([f[k], f[k + 1], f[k + 2]])))
+/// Triangle `p` of `t` as three vertices, for the common layouts: `None` where the reader
+/// must decide (inactive, out of range, an unusual layout).
+#[inline(always)]
+fn reader_tri(t: &TriangleReader, p: usize) -> Option<[f32x4; 3]> {
+    let f = t.triangle_fast(p as u32)?;
+    if f[0].is_nan() || f[3].is_nan() || f[6].is_nan() {
+        return None;
     }
+    Some([0, 3, 6].map(|k| lanes([f[k], f[k + 1], f[k + 2]])))
 }
 
 /// The vertices of an `R32G32B32_SFLOAT` geometry, read 16 bytes at a time (lane 3 is the
@@ -983,22 +968,51 @@ impl<'a> F32Tris<'a> {
     }
 }
 
-impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, STRIDE> {
+impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
+    /// Decodes triangles `base..` as [`decode_tris`] does, reading the index records of the
+    /// whole run in order (each triangle's own range test is the bounds check of the run).
     #[inline(always)]
-    fn get(&self, p: usize) -> Option<[f32x4; 3]> {
+    fn decode(
+        &self,
+        t: &TriangleReader,
+        base: usize,
+        first: usize,
+        outs: &mut [[u8; TRI_BYTES]],
+        refs: &mut [PrimRef],
+    ) -> Result<(usize, Option<Box4>)> {
+        // (A copy: the loop then keeps the layout in registers.)
+        let g = *self;
+        if IDX == 0 {
+            let tris = (base..).map(move |p| g.tri([3 * p, 3 * p + 1, 3 * p + 2]));
+            return decode_tris(tris, t, base, first, outs, refs);
+        }
+        let size = 3 * IDX;
         let u = |b: &[u8], k: usize| -> usize {
             if IDX == 2 {
                 u16::from_le_bytes([b[2 * k], b[2 * k + 1]]) as usize
             } else {
-                u32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]) as usize
+                bytemuck::pod_read_unaligned::<u32>(&b[4 * k..4 * k + 4]).to_le() as usize
             }
         };
-        let idx = if IDX == 0 {
-            [3 * p, 3 * p + 1, 3 * p + 2]
-        } else {
-            let b = self.index.get(3 * IDX * p..3 * IDX * (p + 1))?;
-            [u(b, 0), u(b, 1), u(b, 2)]
-        };
+        match g.index.get(size * base..size * (base + outs.len())) {
+            Some(records) => {
+                let tris = records
+                    .chunks_exact(size)
+                    .map(move |b| g.tri([u(b, 0), u(b, 1), u(b, 2)]));
+                decode_tris(tris, t, base, first, outs, refs)
+            }
+            // Index records past the buffer: the reader reports them.
+            None => {
+                let tris = (base..).map(|p| reader_tri(t, p));
+                decode_tris(tris, t, base, first, outs, refs)
+            }
+        }
+    }
+
+    /// The triangle of vertex indices `idx` (before firstVertex): `None` where the reader
+    /// must decide (a vertex out of range, an X that is NaN).
+    #[inline(always)]
+    fn tri(&self, idx: [usize; 3]) -> Option<[f32x4; 3]> {
         let fv = self.first_vertex as usize;
         let v = [
             idx[0].wrapping_add(fv),
@@ -1031,11 +1045,12 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
 /// `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
 /// doubled centroids (`lo + hi`, lane 3 zero), united in order as the Morton builder would
 /// (saving it a pass over the references), or `None` when a centroid has a NaN lane (then the
-/// result depends on the grouping). `s` decodes the common cases, the reader the others (and
-/// reports what is wrong).
-#[inline(always)]
+/// result depends on the grouping). `tris` decodes the common cases in order, the reader the
+/// others (and reports what is wrong). (Not inlined: inside the caller's closure the sums
+/// stay in memory.)
+#[inline(never)]
 fn decode_tris(
-    s: &impl TriSource,
+    tris: impl Iterator<Item = Option<[f32x4; 3]>>,
     t: &TriangleReader,
     base: usize,
     first: usize,
@@ -1048,14 +1063,7 @@ fn decode_tris(
     // Lane 3 of the reference's low half: its sequence number, counted up as a vector.
     let mut id = bytemuck::cast::<[u32; 4], i32x4>([0, 0, 0, first as u32]);
     let next = i32x4::new([0, 0, 0, 1]);
-    for (j, (out, r)) in outs.iter_mut().zip(refs.iter_mut()).enumerate() {
-        let [a, b, c] = match s.get(base + j) {
-            Some(v) => v,
-            None => match t.triangle((base + j) as u32)? {
-                Some(v) => v.map(lanes),
-                None => [f32x4::splat(f32::NAN); 3],
-            },
-        };
+    let mut put = |out: &mut [u8; TRI_BYTES], r: &mut PrimRef, [a, b, c]: [f32x4; 3], dead| {
         // The three vertices, each store overwriting the previous one's lane 3.
         let bytes = |v: f32x4| -> [u8; 16] { bytemuck::cast(v) };
         out[..16].copy_from_slice(&bytes(a));
@@ -1065,7 +1073,6 @@ fn decode_tris(
         // it is inactive (high).
         let tri = Box4::triangle(a, b, c);
         let (lo, hi) = (tri.lo & XYZ, tri.hi & XYZ);
-        let dead = a.as_array()[0].is_nan();
         let mark = if dead { DEAD } else { f32x4::ZERO };
         *r = bytemuck::cast([lo | bytemuck::cast::<i32x4, f32x4>(id), hi | mark]);
         id += next;
@@ -1075,6 +1082,31 @@ fn decode_tris(
             let c = lo + hi;
             centroids = centroids.union(Box4 { lo: c, hi: c });
             nan |= c.is_nan();
+        }
+    };
+    let mut slots = outs.iter_mut().zip(refs.iter_mut()).zip(tris).enumerate();
+    loop {
+        // The triangles `tris` decodes, in a loop without calls (which would keep the sums
+        // in memory), up to one it leaves to the reader.
+        let rest = loop {
+            let Some((j, ((out, r), tri))) = slots.next() else {
+                break None;
+            };
+            match tri {
+                Some(v) => put(out, r, v, false),
+                None => break Some((j, out, r)),
+            }
+        };
+        let Some((j, out, r)) = rest else {
+            break;
+        };
+        // Inactive: the first vertex's X is NaN.
+        match t.triangle((base + j) as u32)? {
+            Some(v) => {
+                let v = v.map(lanes);
+                put(out, r, v, v[0].as_array()[0].is_nan());
+            }
+            None => put(out, r, [f32x4::splat(f32::NAN); 3], true),
         }
     }
     let clean = nan.to_bitmask() == 0;
