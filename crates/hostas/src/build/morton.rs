@@ -475,7 +475,8 @@ impl Ctx<'_> {
             }
             let i = WIDTH - 1 - best % WIDTH;
             let (b, size) = (start[i], best / WIDTH);
-            let mid = if depth < MEDIAN_DEPTH {
+            // (A pair splits in its middle whatever its codes.)
+            let mid = if depth < MEDIAN_DEPTH && size > 2 {
                 split_point(&keys[b..b + size], base + b, self.top, self.delta)
             } else {
                 size / 2
