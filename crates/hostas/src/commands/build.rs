@@ -907,9 +907,8 @@ impl F32Verts<'_> {
 struct F32Geometry<'a, const IDX: usize, const STRIDE: usize> {
     /// From `primitiveOffset` (indexed geometries).
     index: &'a [u8],
+    /// From vertex `firstVertex`, so that indices address them directly.
     verts: F32Verts<'a>,
-    /// (A `u32`, so that vertex offsets provably do not overflow.)
-    first_vertex: u32,
 }
 
 enum F32Tris<'a> {
@@ -939,31 +938,28 @@ impl<'a> F32Tris<'a> {
             Some(d) => (d, l.max_vertex + 1),
             None => (l.vertex_data.get(..end)?, l.max_vertex),
         };
+        // From vertex `firstVertex` (past the end: the reader decodes the geometry).
         let verts = F32Verts {
-            data,
+            data: data.get(l.first_vertex.checked_mul(l.vertex_stride)?..)?,
             stride: l.vertex_stride,
-            count,
+            count: count.saturating_sub(l.first_vertex),
         };
-        let first_vertex = u32::try_from(l.first_vertex).ok()?;
         fn g<'a, const IDX: usize, const STRIDE: usize>(
             l: &F32Layout<'a>,
             verts: F32Verts<'a>,
-            first_vertex: u32,
         ) -> F32Geometry<'a, IDX, STRIDE> {
             F32Geometry {
                 index: l.index_data,
                 verts,
-                first_vertex,
             }
         }
-        let fv = first_vertex;
         Some(match (l.index_size, l.vertex_stride == 12) {
-            (0, true) => F32Tris::I0(g(&l, verts, fv)),
-            (2, true) => F32Tris::I2(g(&l, verts, fv)),
-            (_, true) => F32Tris::I4(g(&l, verts, fv)),
-            (0, false) => F32Tris::I0S(g(&l, verts, fv)),
-            (2, false) => F32Tris::I2S(g(&l, verts, fv)),
-            (_, false) => F32Tris::I4S(g(&l, verts, fv)),
+            (0, true) => F32Tris::I0(g(&l, verts)),
+            (2, true) => F32Tris::I2(g(&l, verts)),
+            (_, true) => F32Tris::I4(g(&l, verts)),
+            (0, false) => F32Tris::I0S(g(&l, verts)),
+            (2, false) => F32Tris::I2S(g(&l, verts)),
+            (_, false) => F32Tris::I4S(g(&l, verts)),
         })
     }
 }
@@ -1009,16 +1005,10 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
         }
     }
 
-    /// The triangle of vertex indices `idx` (before firstVertex): `None` where the reader
-    /// must decide (a vertex out of range, an X that is NaN).
+    /// The triangle of vertex indices `v` (from firstVertex): `None` where the reader must
+    /// decide (a vertex out of range, an X that is NaN).
     #[inline(always)]
-    fn tri(&self, idx: [usize; 3]) -> Option<[f32x4; 3]> {
-        let fv = self.first_vertex as usize;
-        let v = [
-            idx[0].wrapping_add(fv),
-            idx[1].wrapping_add(fv),
-            idx[2].wrapping_add(fv),
-        ];
+    fn tri(&self, v: [usize; 3]) -> Option<[f32x4; 3]> {
         // With 12-byte vertices the reads' own bounds checks are this test: the data ends
         // where vertex `count - 1`'s 16 bytes do.
         if STRIDE != 12 && v[0].max(v[1]).max(v[2]) >= self.verts.count {
