@@ -238,12 +238,14 @@ fn codes<const B: usize>(
             }
             h
         })
-        .reduce(hist_new, |mut a, b| {
+        // (Without an identity: each would be one more histogram to zero.)
+        .reduce_with(|mut a, b| {
             for (x, y) in a.iter_mut().zip(b.iter()) {
                 *x += y;
             }
             a
         })
+        .unwrap_or_else(hist_new)
 }
 
 /// Per sorted position, 1 + the highest bit in which its code and the next differ (0: equal,
