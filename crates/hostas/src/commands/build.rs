@@ -1023,8 +1023,9 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
             verts.vertex(v[1])?,
             verts.vertex(v[2])?,
         );
-        // (One test on whole vectors, so that each vertex stays one load.)
-        if (a.is_nan() | b.is_nan() | c.is_nan()).to_bitmask() & 1 != 0 {
+        // An X that is NaN makes the sum's NaN (so do infinities of both signs, which the
+        // reader then decodes): one test on whole vectors, each vertex staying one load.
+        if ((a + b) + c).is_nan().to_bitmask() & 1 != 0 {
             return None;
         }
         Some([a, b, c])
