@@ -11,7 +11,7 @@ use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
 use crate::layout::{LEAF_BIT, Node, WIDTH};
 use crate::math::Box4;
 use rayon::prelude::*;
-use wide::{f32x4, f64x4, u8x32, u64x4};
+use wide::{f32x4, f64x4, u8x32, u32x8, u64x4};
 
 /// Spreads the low 10 bits of `v` to every third bit.
 const fn spread(v: u32) -> u32 {
@@ -78,14 +78,15 @@ fn centroid_bounds(refs: &[PrimRef]) -> Box4 {
 }
 
 /// Digit histograms (bucket counts, then bucket starts).
-type Hist = Box<[u32; BUCKETS]>;
+type Hist<const B: usize = BUCKETS> = Box<[u32; B]>;
 
-fn hist_new() -> Hist {
-    Box::new([0; BUCKETS])
+fn hist_new<const B: usize>() -> Hist<B> {
+    // (Not through an array on the stack: a wide histogram is 128 KiB.)
+    bytemuck::allocation::zeroed_box()
 }
 
 /// Turns counts into starts.
-fn starts(h: &mut [u32; BUCKETS]) {
+fn starts<const B: usize>(h: &mut [u32; B]) {
     let mut sum = 0;
     for c in h.iter_mut() {
         let v = *c;
@@ -97,15 +98,15 @@ fn starts(h: &mut [u32; BUCKETS]) {
 /// One radix pass: `src` scattered into `dst` by the digit at `shift` (`at` holds the bucket
 /// starts), `each` seeing every key (to count the next digit).
 #[inline(always)]
-fn scatter(
+fn scatter<const B: usize>(
     src: &[u64],
     dst: &mut [u64],
-    at: &mut [u32; BUCKETS],
+    at: &mut [u32; B],
     shift: u32,
     mut each: impl FnMut(u64),
 ) {
     for &k in src {
-        let b = (k >> shift) as usize & (BUCKETS - 1);
+        let b = (k >> shift) as usize & (B - 1);
         let p = at[b];
         if let Some(d) = dst.get_mut(p as usize) {
             *d = k;
@@ -117,12 +118,18 @@ fn scatter(
 
 /// Counts the digit at `shift` of `k` into `h`.
 #[inline(always)]
-fn count(h: &mut [u32; BUCKETS], shift: u32) -> impl FnMut(u64) + '_ {
-    move |k| h[(k >> shift) as usize & (BUCKETS - 1)] += 1
+fn count<const B: usize>(h: &mut [u32; B], shift: u32) -> impl FnMut(u64) + '_ {
+    move |k| h[(k >> shift) as usize & (B - 1)] += 1
 }
 
 /// Inputs of at least this many primitives sort by the top digit first.
 const MSD_MIN: usize = 1 << 17;
+/// Smaller inputs of at least this many primitives sort by two wide digits: one pass fewer,
+/// for histograms whose upkeep only pays from here.
+const WIDE_MIN: usize = 1 << 15;
+/// Bits per wide digit: two passes over the 30 code bits.
+const WIDE_DIGIT: u32 = 15;
+const WIDE_BUCKETS: usize = 1 << WIDE_DIGIT;
 /// Top buckets up to this size are sorted by comparison.
 const SMALL_SORT: usize = 96;
 
@@ -170,7 +177,7 @@ fn sort(keys: &mut [u64], tmp: &mut [u64], mut h: Hist, msd: bool) -> Vec<u32> {
             .with_min_len(BUCKETS / 16)
             .for_each(|(x, y)| sort_low(x, y));
     } else {
-        let (mut h1, mut h2) = (hist_new(), hist_new());
+        let (mut h1, mut h2) = (hist_new::<BUCKETS>(), hist_new::<BUCKETS>());
         scatter(keys, tmp, &mut h, 32, count(&mut h1, 32 + DIGIT));
         starts(&mut h1);
         scatter(
@@ -186,6 +193,59 @@ fn sort(keys: &mut [u64], tmp: &mut [u64], mut h: Hist, msd: bool) -> Vec<u32> {
         scatter(keys, tmp, &mut h2, 32 + TOP_SHIFT, |_| {});
     }
     top
+}
+
+/// Sorts `keys` by two wide digits (into `tmp` and back: both changed), given the counts of
+/// the lower one. Returns what [`sort`] does.
+fn sort_wide(keys: &mut [u64], tmp: &mut [u64], mut h: Hist<WIDE_BUCKETS>) -> Vec<u32> {
+    let n = keys.len();
+    starts(&mut h);
+    let mut h1 = hist_new::<WIDE_BUCKETS>();
+    scatter(keys, tmp, &mut h, 32, count(&mut h1, 32 + WIDE_DIGIT));
+    starts(&mut h1);
+    // A top digit starts where the first wide bucket of its upper bits does.
+    let per_top = 1 << (TOP_SHIFT - WIDE_DIGIT);
+    let mut top: Vec<u32> = h1.iter().step_by(per_top).copied().collect();
+    top.push(n as u32);
+    scatter(tmp, keys, &mut h1, 32 + WIDE_DIGIT, |_| {});
+    top
+}
+
+/// Writes the keys `(code, position)` of `refs` (centroids mapped by `lo` and `scale`) and
+/// returns the histogram of their digit at `shift` (the first sorted by). Centroids lie in
+/// the bounds, so the scaled values are in [0, 1023] (up to rounding below 1024); NaN
+/// converts to i32::MIN, whose low bits are 0.
+fn codes<const B: usize>(
+    keys: &mut [u64],
+    refs: &[PrimRef],
+    lo: f32x4,
+    scale: f32x4,
+    shift: u32,
+) -> Hist<B> {
+    keys.par_chunks_mut(CHUNK)
+        .zip(refs.par_chunks(CHUNK))
+        .enumerate()
+        .map(move |(ci, (ks, rs))| {
+            let mut h = hist_new::<B>();
+            let first = (ci * CHUNK) as u64;
+            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
+                let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
+                let code = (SPREAD[q[0] as usize & 1023] << 2)
+                    | (SPREAD[q[1] as usize & 1023] << 1)
+                    | SPREAD[q[2] as usize & 1023];
+                *k = (code as u64) << 32 | (first + i as u64);
+                h[(code >> shift) as usize & (B - 1)] += 1;
+            }
+            h
+        })
+        // (Without an identity: each would be one more histogram to zero.)
+        .reduce_with(|mut a, b| {
+            for (x, y) in a.iter_mut().zip(b.iter()) {
+                *x += y;
+            }
+            a
+        })
+        .unwrap_or_else(hist_new)
 }
 
 /// Per sorted position, 1 + the highest bit in which its code and the next differ (0: equal,
@@ -248,48 +308,30 @@ pub fn build(
             .map(|e| if e > 0.0 { 1023.0 / e } else { 0.0 }),
     );
     let lo = c.lo;
-    // Keys (code, position) and the histogram of the first digit sorted by. Centroids lie in
-    // the bounds, so the scaled values are in [0, 1023] (up to rounding below 1024); NaN
-    // converts to i32::MIN, whose low bits are 0.
     let keys = &mut keys[..n];
     let tmp = &mut tmp[..n];
     let aux = &mut aux[..n];
     // Large inputs are sorted by the top digit first (one pass through memory) and then each
-    // top bucket by the two lower digits where it sits in the caches; small ones by three
-    // passes from the lowest digit, each counting the next. Both sort by the whole key, whose
-    // low half (the position) keeps equal codes in input order.
-    let msd = n >= MSD_MIN;
-    let first_digit = if msd { TOP_SHIFT } else { 0 };
-    let h = keys
-        .par_chunks_mut(CHUNK)
-        .zip(refs.par_chunks(CHUNK))
-        .enumerate()
-        .map(move |(ci, (ks, rs))| {
-            let mut h = hist_new();
-            let first = (ci * CHUNK) as u64;
-            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
-                let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
-                let code = (SPREAD[q[0] as usize & 1023] << 2)
-                    | (SPREAD[q[1] as usize & 1023] << 1)
-                    | SPREAD[q[2] as usize & 1023];
-                *k = (code as u64) << 32 | (first + i as u64);
-                h[(code >> first_digit) as usize & (BUCKETS - 1)] += 1;
-            }
-            h
-        })
-        .reduce(hist_new, |mut a, b| {
-            for (x, y) in a.iter_mut().zip(b.iter()) {
-                *x += y;
-            }
-            a
-        });
-    let top = sort(keys, tmp, h, msd);
-    // `keys` is free now: the differing bits of neighbouring codes, with 32 zeros after.
-    let delta = &mut bytemuck::cast_slice_mut::<u64, u8>(keys)[..(n + 32).min(8 * n)];
+    // top bucket by the two lower digits where it sits in the caches; middle ones by two wide
+    // digits and small ones by three, from the lowest, each pass counting the next digit. All
+    // sort by the whole key, whose low half (the position) keeps equal codes in input order.
+    let (top, sorted, free) = if n >= MSD_MIN {
+        let h = codes::<BUCKETS>(keys, refs, lo, scale, TOP_SHIFT);
+        (sort(keys, tmp, h, true), tmp, keys)
+    } else if n >= WIDE_MIN {
+        let h = codes::<WIDE_BUCKETS>(keys, refs, lo, scale, 0);
+        (sort_wide(keys, tmp, h), keys, tmp)
+    } else {
+        let h = codes::<BUCKETS>(keys, refs, lo, scale, 0);
+        (sort(keys, tmp, h, false), tmp, keys)
+    };
+    // The other array is free now: the differing bits of neighbouring codes, with 32 zeros
+    // after.
+    let delta = &mut bytemuck::cast_slice_mut::<u64, u8>(free)[..(n + 32).min(8 * n)];
     delta[n..].fill(0);
-    deltas(tmp, &mut delta[..n]);
+    deltas(sorted, &mut delta[..n]);
     let ctx = Ctx {
-        keys: tmp,
+        keys: sorted,
         refs,
         top: &top,
         delta,
@@ -417,40 +459,50 @@ impl Ctx<'_> {
             };
             return (leaf(keys, self.refs, dst), c);
         }
-        // The parts, in position order, by their ends (each starts where the previous ends).
-        let mut ends = [0usize; WIDTH];
-        ends[0] = n;
-        // When each part was made (a split's left half keeps its part's number).
-        let mut made = [0usize; WIDTH];
+        // The parts by when they were made (a split's left half keeps its part's number, the
+        // right half takes the next one): where each starts, which follows it in position
+        // order, and its split key `size * WIDTH + (WIDTH - 1 - number)`, 0 while unmade.
+        // The keys are distinct, so their maximum names the part to split next.
+        let mut start = [0usize; WIDTH];
+        let mut next = [0u8; WIDTH];
+        let mut key = u32x8::from([(n * WIDTH + WIDTH - 1) as u32, 0, 0, 0, 0, 0, 0, 0]);
+        let lanes = u32x8::from([0, 1, 2, 3, 4, 5, 6, 7]);
         let mut live = 1;
         while live < WIDTH {
             // Split the part with the most primitives (areas are not known top-down), the
             // first made among equals; parts of one primitive are never split.
-            let (mut i, mut best, mut b, mut s) = (0, 0, 0, 0);
-            for (j, &e) in ends[..live].iter().enumerate() {
-                let key = (e - s) * WIDTH + (WIDTH - 1 - made[j]);
-                if key > best {
-                    (i, best, b) = (j, key, s);
-                }
-                s = e;
-            }
+            let best = key.reduce_max() as usize;
             if best < 2 * WIDTH {
                 break;
             }
-            let e = ends[i];
-            let mid = if depth < MEDIAN_DEPTH {
-                split_point(&keys[b..e], base + b, self.top, self.delta)
+            let i = WIDTH - 1 - best % WIDTH;
+            let (b, size) = (start[i], best / WIDTH);
+            // (A pair splits in its middle whatever its codes.)
+            let mid = if depth < MEDIAN_DEPTH && size > 2 {
+                split_point(&keys[b..b + size], base + b, self.top, self.delta)
             } else {
-                (e - b) / 2
-            };
-            // (A loop: `copy_within` is a call to memmove.)
-            for j in (i..live).rev() {
-                ends[j + 1] = ends[j];
-                made[j + 1] = made[j];
+                size / 2
             }
-            ends[i] = b + mid.clamp(1, e - b - 1);
-            made[i + 1] = live;
+            .clamp(1, size - 1);
+            start[live] = b + mid;
+            next[live] = next[i];
+            next[i] = live as u8;
+            let left = u32x8::splat((mid * WIDTH + WIDTH - 1 - i) as u32);
+            let right = u32x8::splat(((size - mid) * WIDTH + WIDTH - 1 - live) as u32);
+            key = lanes.simd_eq(u32x8::splat(i as u32)).bitselect(left, key);
+            key = lanes
+                .simd_eq(u32x8::splat(live as u32))
+                .bitselect(right, key);
             live += 1;
+        }
+        // The parts in position order, by their ends (each starts where the previous ends).
+        let key = key.to_array();
+        let mut ends = [0usize; WIDTH];
+        let (mut part, mut end) = (0, 0);
+        for e in &mut ends[..live] {
+            end += key[part] as usize / WIDTH;
+            *e = end;
+            part = next[part] as usize;
         }
         let me = out.reserve();
         let mut node = Node::EMPTY;
@@ -543,7 +595,7 @@ mod tests {
         }
     }
 
-    /// Both sorts (from the top digit, from the lowest) give the keys in order.
+    /// The sorts (from the top digit, from the lowest, by wide digits) give the keys in order.
     #[test]
     fn radix_sorts_sort() {
         let mut rnd = xorshift(0x2545_f491);
@@ -558,15 +610,26 @@ mod tests {
                 .collect();
             let mut want = keys.clone();
             want.sort_unstable();
-            for msd in [false, true] {
-                let digit = if msd { TOP_SHIFT } else { 0 };
-                let mut h = hist_new();
-                for k in &keys {
-                    h[(k >> (32 + digit)) as usize & (BUCKETS - 1)] += 1;
-                }
+            for (msd, wide) in [(false, false), (true, false), (false, true)] {
                 let (mut k, mut t) = (keys.clone(), vec![0; n]);
-                let top = sort(&mut k, &mut t, h, msd);
-                assert_eq!(t, want, "n {n} msd {msd}");
+                let top = if wide {
+                    let mut h = hist_new::<WIDE_BUCKETS>();
+                    for k in &keys {
+                        h[(k >> 32) as usize & (WIDE_BUCKETS - 1)] += 1;
+                    }
+                    let top = sort_wide(&mut k, &mut t, h);
+                    // (Sorted back into `k`.)
+                    std::mem::swap(&mut k, &mut t);
+                    top
+                } else {
+                    let digit = if msd { TOP_SHIFT } else { 0 };
+                    let mut h = hist_new::<BUCKETS>();
+                    for k in &keys {
+                        h[(k >> (32 + digit)) as usize & (BUCKETS - 1)] += 1;
+                    }
+                    sort(&mut k, &mut t, h, msd)
+                };
+                assert_eq!(t, want, "n {n} msd {msd} wide {wide}");
                 for (d, w) in top.windows(2).enumerate() {
                     for k in &want[w[0] as usize..w[1] as usize] {
                         assert_eq!((k >> (32 + TOP_SHIFT)) as usize, d);

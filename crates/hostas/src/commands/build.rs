@@ -805,25 +805,16 @@ fn decode_geometries(
                             .map_err(|_| internal("triangle slots"))?;
                         let first = first + base;
                         let (dead, cb) = match F32Tris::new(t) {
-                            Some(F32Tris::I0(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
+                            Some(F32Tris::I0(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I2(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I4(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I0S(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I2S(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            Some(F32Tris::I4S(d)) => d.decode(t, base, first, outs, chunk_refs),
+                            None => {
+                                let tris = (base..).map(|p| reader_tri(t, p));
+                                decode_tris(tris, t, base, first, outs, chunk_refs)
                             }
-                            Some(F32Tris::I2(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I4(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I0S(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I2S(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            Some(F32Tris::I4S(d)) => {
-                                decode_tris(&d, t, base, first, outs, chunk_refs)
-                            }
-                            None => decode_tris(t, t, base, first, outs, chunk_refs),
                         }?;
                         (inactive, centroids) = (dead, cb);
                     }
@@ -872,27 +863,21 @@ fn decode_geometries(
     Ok((stored, centroids))
 }
 
-/// Triangles of one geometry as three vertices (lane 3 unspecified): `None` where the reader
-/// must decide (inactive, out of range, an unusual layout).
-trait TriSource {
-    fn get(&self, p: usize) -> Option<[f32x4; 3]>;
-}
-
 /// A vertex in lanes 0..3 (lane 3 zero).
 #[inline(always)]
 fn lanes(v: [f32; 3]) -> f32x4 {
     f32x4::from([v[0], v[1], v[2], 0.0])
 }
 
-impl TriSource for TriangleReader<'_> {
-    #[inline(always)]
-    fn get(&self, p: usize) -> Option<[f32x4; 3]> {
-        let f = self.triangle_fast(p as u32)?;
-        if f[0].is_nan() || f[3].is_nan() || f[6].is_nan() {
-            return None;
-        }
-        Some([0, 3, 6].map(|k| lanes([f[k], f[k + 1], f[k + 2]])))
+/// Triangle `p` of `t` as three vertices, for the common layouts: `None` where the reader
+/// must decide (inactive, out of range, an unusual layout).
+#[inline(always)]
+fn reader_tri(t: &TriangleReader, p: usize) -> Option<[f32x4; 3]> {
+    let f = t.triangle_fast(p as u32)?;
+    if f[0].is_nan() || f[3].is_nan() || f[6].is_nan() {
+        return None;
     }
+    Some([0, 3, 6].map(|k| lanes([f[k], f[k + 1], f[k + 2]])))
 }
 
 /// The vertices of an `R32G32B32_SFLOAT` geometry, read 16 bytes at a time (lane 3 is the
@@ -922,9 +907,8 @@ impl F32Verts<'_> {
 struct F32Geometry<'a, const IDX: usize, const STRIDE: usize> {
     /// From `primitiveOffset` (indexed geometries).
     index: &'a [u8],
+    /// From vertex `firstVertex`, so that indices address them directly.
     verts: F32Verts<'a>,
-    /// (A `u32`, so that vertex offsets provably do not overflow.)
-    first_vertex: u32,
 }
 
 enum F32Tris<'a> {
@@ -954,57 +938,77 @@ impl<'a> F32Tris<'a> {
             Some(d) => (d, l.max_vertex + 1),
             None => (l.vertex_data.get(..end)?, l.max_vertex),
         };
+        // From vertex `firstVertex` (past the end: the reader decodes the geometry).
         let verts = F32Verts {
-            data,
+            data: data.get(l.first_vertex.checked_mul(l.vertex_stride)?..)?,
             stride: l.vertex_stride,
-            count,
+            count: count.saturating_sub(l.first_vertex),
         };
-        let first_vertex = u32::try_from(l.first_vertex).ok()?;
         fn g<'a, const IDX: usize, const STRIDE: usize>(
             l: &F32Layout<'a>,
             verts: F32Verts<'a>,
-            first_vertex: u32,
         ) -> F32Geometry<'a, IDX, STRIDE> {
             F32Geometry {
                 index: l.index_data,
                 verts,
-                first_vertex,
             }
         }
-        let fv = first_vertex;
         Some(match (l.index_size, l.vertex_stride == 12) {
-            (0, true) => F32Tris::I0(g(&l, verts, fv)),
-            (2, true) => F32Tris::I2(g(&l, verts, fv)),
-            (_, true) => F32Tris::I4(g(&l, verts, fv)),
-            (0, false) => F32Tris::I0S(g(&l, verts, fv)),
-            (2, false) => F32Tris::I2S(g(&l, verts, fv)),
-            (_, false) => F32Tris::I4S(g(&l, verts, fv)),
+            (0, true) => F32Tris::I0(g(&l, verts)),
+            (2, true) => F32Tris::I2(g(&l, verts)),
+            (_, true) => F32Tris::I4(g(&l, verts)),
+            (0, false) => F32Tris::I0S(g(&l, verts)),
+            (2, false) => F32Tris::I2S(g(&l, verts)),
+            (_, false) => F32Tris::I4S(g(&l, verts)),
         })
     }
 }
 
-impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, STRIDE> {
+impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
+    /// Decodes triangles `base..` as [`decode_tris`] does, reading the index records of the
+    /// whole run in order (each triangle's own range test is the bounds check of the run).
     #[inline(always)]
-    fn get(&self, p: usize) -> Option<[f32x4; 3]> {
+    fn decode(
+        &self,
+        t: &TriangleReader,
+        base: usize,
+        first: usize,
+        outs: &mut [[u8; TRI_BYTES]],
+        refs: &mut [PrimRef],
+    ) -> Result<(usize, Option<Box4>)> {
+        // (A copy: the loop then keeps the layout in registers.)
+        let g = *self;
+        if IDX == 0 {
+            let tris = (base..).map(move |p| g.tri([3 * p, 3 * p + 1, 3 * p + 2]));
+            return decode_tris(tris, t, base, first, outs, refs);
+        }
+        let size = 3 * IDX;
         let u = |b: &[u8], k: usize| -> usize {
             if IDX == 2 {
                 u16::from_le_bytes([b[2 * k], b[2 * k + 1]]) as usize
             } else {
-                u32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]) as usize
+                bytemuck::pod_read_unaligned::<u32>(&b[4 * k..4 * k + 4]).to_le() as usize
             }
         };
-        let idx = if IDX == 0 {
-            [3 * p, 3 * p + 1, 3 * p + 2]
-        } else {
-            let b = self.index.get(3 * IDX * p..3 * IDX * (p + 1))?;
-            [u(b, 0), u(b, 1), u(b, 2)]
-        };
-        let fv = self.first_vertex as usize;
-        let v = [
-            idx[0].wrapping_add(fv),
-            idx[1].wrapping_add(fv),
-            idx[2].wrapping_add(fv),
-        ];
+        match g.index.get(size * base..size * (base + outs.len())) {
+            Some(records) => {
+                let tris = records
+                    .chunks_exact(size)
+                    .map(move |b| g.tri([u(b, 0), u(b, 1), u(b, 2)]));
+                decode_tris(tris, t, base, first, outs, refs)
+            }
+            // Index records past the buffer: the reader reports them.
+            None => {
+                let tris = (base..).map(|p| reader_tri(t, p));
+                decode_tris(tris, t, base, first, outs, refs)
+            }
+        }
+    }
+
+    /// The triangle of vertex indices `v` (from firstVertex): `None` where the reader must
+    /// decide (a vertex out of range, an X that is NaN).
+    #[inline(always)]
+    fn tri(&self, v: [usize; 3]) -> Option<[f32x4; 3]> {
         // With 12-byte vertices the reads' own bounds checks are this test: the data ends
         // where vertex `count - 1`'s 16 bytes do.
         if STRIDE != 12 && v[0].max(v[1]).max(v[2]) >= self.verts.count {
@@ -1019,8 +1023,9 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
             verts.vertex(v[1])?,
             verts.vertex(v[2])?,
         );
-        // (One test on whole vectors, so that each vertex stays one load.)
-        if (a.is_nan() | b.is_nan() | c.is_nan()).to_bitmask() & 1 != 0 {
+        // An X that is NaN makes the sum's NaN (so do infinities of both signs, which the
+        // reader then decodes): one test on whole vectors, each vertex staying one load.
+        if ((a + b) + c).is_nan().to_bitmask() & 1 != 0 {
             return None;
         }
         Some([a, b, c])
@@ -1031,11 +1036,12 @@ impl<const IDX: usize, const STRIDE: usize> TriSource for F32Geometry<'_, IDX, S
 /// `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
 /// doubled centroids (`lo + hi`, lane 3 zero), united in order as the Morton builder would
 /// (saving it a pass over the references), or `None` when a centroid has a NaN lane (then the
-/// result depends on the grouping). `s` decodes the common cases, the reader the others (and
-/// reports what is wrong).
-#[inline(always)]
+/// result depends on the grouping). `tris` decodes the common cases in order, the reader the
+/// others (and reports what is wrong). (Not inlined: inside the caller's closure the sums
+/// stay in memory.)
+#[inline(never)]
 fn decode_tris(
-    s: &impl TriSource,
+    tris: impl Iterator<Item = Option<[f32x4; 3]>>,
     t: &TriangleReader,
     base: usize,
     first: usize,
@@ -1048,14 +1054,7 @@ fn decode_tris(
     // Lane 3 of the reference's low half: its sequence number, counted up as a vector.
     let mut id = bytemuck::cast::<[u32; 4], i32x4>([0, 0, 0, first as u32]);
     let next = i32x4::new([0, 0, 0, 1]);
-    for (j, (out, r)) in outs.iter_mut().zip(refs.iter_mut()).enumerate() {
-        let [a, b, c] = match s.get(base + j) {
-            Some(v) => v,
-            None => match t.triangle((base + j) as u32)? {
-                Some(v) => v.map(lanes),
-                None => [f32x4::splat(f32::NAN); 3],
-            },
-        };
+    let mut put = |out: &mut [u8; TRI_BYTES], r: &mut PrimRef, [a, b, c]: [f32x4; 3], dead| {
         // The three vertices, each store overwriting the previous one's lane 3.
         let bytes = |v: f32x4| -> [u8; 16] { bytemuck::cast(v) };
         out[..16].copy_from_slice(&bytes(a));
@@ -1065,7 +1064,6 @@ fn decode_tris(
         // it is inactive (high).
         let tri = Box4::triangle(a, b, c);
         let (lo, hi) = (tri.lo & XYZ, tri.hi & XYZ);
-        let dead = a.as_array()[0].is_nan();
         let mark = if dead { DEAD } else { f32x4::ZERO };
         *r = bytemuck::cast([lo | bytemuck::cast::<i32x4, f32x4>(id), hi | mark]);
         id += next;
@@ -1075,6 +1073,31 @@ fn decode_tris(
             let c = lo + hi;
             centroids = centroids.union(Box4 { lo: c, hi: c });
             nan |= c.is_nan();
+        }
+    };
+    let mut slots = outs.iter_mut().zip(refs.iter_mut()).zip(tris).enumerate();
+    loop {
+        // The triangles `tris` decodes, in a loop without calls (which would keep the sums
+        // in memory), up to one it leaves to the reader.
+        let rest = loop {
+            let Some((j, ((out, r), tri))) = slots.next() else {
+                break None;
+            };
+            match tri {
+                Some(v) => put(out, r, v, false),
+                None => break Some((j, out, r)),
+            }
+        };
+        let Some((j, out, r)) = rest else {
+            break;
+        };
+        // Inactive: the first vertex's X is NaN.
+        match t.triangle((base + j) as u32)? {
+            Some(v) => {
+                let v = v.map(lanes);
+                put(out, r, v, v[0].as_array()[0].is_nan());
+            }
+            None => put(out, r, [f32x4::splat(f32::NAN); 3], true),
         }
     }
     let clean = nan.to_bitmask() == 0;

@@ -12,7 +12,7 @@ use crate::build::tree::{Child, Tree};
 use crate::error::{Error, Result};
 use crate::math::Aabb;
 use rayon::prelude::*;
-use wide::f32x8;
+use wide::{f32x8, f64x4, u32x8};
 
 /// What the header says besides the tree.
 pub struct HeaderFields {
@@ -160,8 +160,14 @@ fn zero_gaps(dst: &mut [u8], plan: &Plan, fields: &HeaderFields, geometries: u64
 
 /// The inner children of a node.
 fn inner_children(node: &Node) -> impl Iterator<Item = u32> + '_ {
-    // Leaves and empty slots (`EMPTY_CHILD`) have the leaf bit.
-    node.child.iter().copied().filter(|c| c & LEAF_BIT == 0)
+    // Leaves and empty slots (`EMPTY_CHILD`) have the leaf bit: one test for all eight.
+    let leaf = u32x8::from(node.child) & u32x8::splat(LEAF_BIT);
+    let mut inner = leaf.simd_eq(u32x8::ZERO).to_bitmask();
+    std::iter::from_fn(move || {
+        let k = inner.trailing_zeros() as usize;
+        inner &= inner.wrapping_sub(1);
+        node.child.get(k).copied()
+    })
 }
 
 /// Checks that every inner child comes after its parent (the depth-first order the builders
@@ -206,37 +212,48 @@ fn node_sah(tree: &[Node], root_area: f32) -> f32 {
     };
     // The children's half areas, eight at a time with the operations of `Aabb::half_area`
     // (0 for an empty box), so the sums are the same.
-    let half_areas = |n: &Node| -> [f32; 8] {
+    let half_areas = |n: &Node| -> f32x8 {
         let v = |a: [f32; 8]| f32x8::from(a);
         let (lx, ly, lz) = (v(n.lo_x), v(n.lo_y), v(n.lo_z));
         let (hx, hy, hz) = (v(n.hi_x), v(n.hi_y), v(n.hi_z));
         let (dx, dy, dz) = (hx - lx, hy - ly, hz - lz);
         let area = dx * dy + dy * dz + dz * dx;
         let full = lx.simd_le(hx) & ly.simd_le(hy) & lz.simd_le(hz);
-        full.select(area, f32x8::ZERO).to_array()
+        full.select(area, f32x8::ZERO)
     };
+    // The children's costs: a primitive test per primitive of a leaf, a node visit per inner
+    // node, 0 for an empty slot.
+    let costs = |n: &Node| -> f32x8 {
+        let child = u32x8::from(n.child);
+        let leaf = (child & u32x8::splat(LEAF_BIT)).simd_eq(u32x8::splat(LEAF_BIT));
+        let empty = child.simd_eq(u32x8::splat(EMPTY_CHILD));
+        let count = f32x8::from(n.count.map(|c| c as f32));
+        let cost = bytemuck::cast::<u32x8, f32x8>(leaf).select(
+            f32x8::splat(SAH_PRIM_COST) * count,
+            f32x8::splat(SAH_NODE_COST),
+        );
+        bytemuck::cast::<u32x8, f32x8>(empty).select(f32x8::ZERO, cost)
+    };
+    // Four of eight lanes in `f64`.
+    let wide4 = |v: &[f32; 8], at: usize| f64x4::from([0, 1, 2, 3].map(|k| v[at + k] as f64));
     let sums: Vec<f64> = tree
         .par_chunks(CHUNK_NODES)
         .map(|tree| {
             let mut sah = 0.0f64;
             for node in tree {
-                let areas = half_areas(node);
-                for k in 0..node.child.len() {
-                    let c = node.child[k];
-                    if c == EMPTY_CHILD {
-                        continue;
-                    }
-                    let cost = if c & LEAF_BIT != 0 {
-                        SAH_PRIM_COST * node.count[k] as f32
-                    } else {
-                        SAH_NODE_COST
-                    };
+                // Each child's cost times its area relative to the root's, eight at a time,
+                // added in slot order. (An empty slot adds 0 times a finite area, which
+                // changes no sum of such terms: none is negative.)
+                let (areas, costs) = (half_areas(node).to_array(), costs(node).to_array());
+                for at in [0, 4] {
                     let rel_area = if root_area > 0.0 {
-                        areas[k] as f64 * inv_root
+                        wide4(&areas, at) * f64x4::splat(inv_root)
                     } else {
-                        1.0
+                        f64x4::splat(1.0)
                     };
-                    sah += cost as f64 * rel_area;
+                    for t in (wide4(&costs, at) * rel_area).to_array() {
+                        sah += t;
+                    }
                 }
             }
             sah
