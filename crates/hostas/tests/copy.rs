@@ -422,6 +422,26 @@ fn corrupted_serialized_data_never_panics() {
     );
 }
 
+/// A structure of `size` bytes at offset 256 of a buffer whose memory holds `stale` bytes.
+fn structure_over_stale_memory(
+    device: &Device,
+    ty: vk::AccelerationStructureTypeKHR,
+    size: u64,
+    stale: u8,
+) -> hostas::AccelerationStructure {
+    let buffer = hostas::Buffer::new(size + 512).unwrap();
+    buffer
+        .write(0, &vec![stale; (size + 512) as usize])
+        .unwrap();
+    device
+        .create_acceleration_structure(&AccelerationStructureCreateInfo {
+            buffer: Some(buffer),
+            offset: 256,
+            ..AccelerationStructureCreateInfo::new(ty, size)
+        })
+        .unwrap()
+}
+
 /// Builds `geometries` into a structure placed at offset 256 of a buffer whose memory, and
 /// the scratch, hold stale bytes (as reused application memory would): the serialized
 /// structure must not depend on them.
@@ -446,18 +466,7 @@ fn build_over_stale_memory(
     let sizes = device
         .build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts)
         .unwrap();
-    let size = sizes.acceleration_structure_size;
-    let buffer = hostas::Buffer::new(size + 512).unwrap();
-    buffer
-        .write(0, &vec![stale; (size + 512) as usize])
-        .unwrap();
-    let dst = device
-        .create_acceleration_structure(&AccelerationStructureCreateInfo {
-            buffer: Some(buffer),
-            offset: 256,
-            ..AccelerationStructureCreateInfo::new(ty, size)
-        })
-        .unwrap();
+    let dst = structure_over_stale_memory(device, ty, sizes.acceleration_structure_size, stale);
     let mut scratch = vec![stale; sizes.build_scratch_size as usize];
     let info = hostas::BuildGeometryInfo::build(ty, flags, geometries, dst, &mut scratch);
     device
@@ -542,17 +551,7 @@ fn updates_into_another_structure_do_not_depend_on_stale_memory() {
         .acceleration_structure_property(src, vk::QueryType::ACCELERATION_STRUCTURE_SIZE_KHR)
         .unwrap();
     let [a, b] = [0x00, 0xa5].map(|stale| {
-        let buffer = hostas::Buffer::new(size + 256).unwrap();
-        buffer
-            .write(0, &vec![stale; (size + 256) as usize])
-            .unwrap();
-        let dst = device
-            .create_acceleration_structure(&AccelerationStructureCreateInfo {
-                buffer: Some(buffer),
-                offset: 256,
-                ..AccelerationStructureCreateInfo::new(ty, size)
-            })
-            .unwrap();
+        let dst = structure_over_stale_memory(&device, ty, size, stale);
         desc.update(&device, flags, src, dst).unwrap();
         device.serialize(dst).unwrap()
     });
