@@ -87,15 +87,11 @@ fn main() {
         &idx,
         vk::GeometryFlagsKHR::OPAQUE,
     )];
-    let mut info = BuildGeometryInfo {
-        ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+    let mut info = BuildGeometryInfo::sizes_query(
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
         flags,
-        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
-        src: None,
-        dst: None,
-        geometries: &geoms,
-        scratch: None,
-    };
+        &geoms,
+    );
     let sizes = device
         .build_sizes(
             vk::AccelerationStructureBuildTypeKHR::HOST,

@@ -454,15 +454,7 @@ fn build_over_stale_memory(
     stale: u8,
 ) -> Vec<u8> {
     let counts: Vec<u32> = ranges.iter().map(|r| r.primitive_count).collect();
-    let probe = hostas::BuildGeometryInfo {
-        ty,
-        flags,
-        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
-        src: None,
-        dst: None,
-        geometries,
-        scratch: None,
-    };
+    let probe = hostas::BuildGeometryInfo::sizes_query(ty, flags, geometries);
     let sizes = device
         .build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts)
         .unwrap();

@@ -61,15 +61,7 @@ fn build(
     ranges: &[BuildRangeInfo],
 ) -> Result<AccelerationStructure, hostas::Error> {
     let counts: Vec<u32> = ranges.iter().map(|r| r.primitive_count).collect();
-    let probe = BuildGeometryInfo {
-        ty,
-        flags,
-        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
-        src: None,
-        dst: None,
-        geometries,
-        scratch: None,
-    };
+    let probe = BuildGeometryInfo::sizes_query(ty, flags, geometries);
     let sizes = device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &counts)?;
     let dst = device.create_acceleration_structure(&AccelerationStructureCreateInfo::new(
         ty,

@@ -267,15 +267,7 @@ fn sizes(
     geometries: &[Geometry],
     counts: &[u32],
 ) -> Result<(), Error> {
-    let probe = BuildGeometryInfo {
-        ty,
-        flags,
-        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
-        src: None,
-        dst: None,
-        geometries,
-        scratch: None,
-    };
+    let probe = BuildGeometryInfo::sizes_query(ty, flags, geometries);
     Device::new()
         .build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, counts)
         .map(|_| ())
@@ -584,7 +576,7 @@ rules! {
     }
 
     sizes_device_build_type: NotSupported, At::NoLocation => {
-        let probe = BuildGeometryInfo { ty: BLAS, flags: fast(), mode: vk::BuildAccelerationStructureModeKHR::BUILD, src: None, dst: None, geometries: &[], scratch: None };
+        let probe = BuildGeometryInfo::sizes_query(BLAS, fast(), &[]);
         Device::new().build_sizes(vk::AccelerationStructureBuildTypeKHR::DEVICE, &probe, &[]).map(|_| ())
     }
 
@@ -727,7 +719,7 @@ rules! {
     dst_too_small: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03675"), info(1) => {
         let device = Device::new();
         let g = [tri_geom()];
-        let probe = BuildGeometryInfo { ty: BLAS, flags: fast(), mode: vk::BuildAccelerationStructureModeKHR::BUILD, src: None, dst: None, geometries: &g, scratch: None };
+        let probe = BuildGeometryInfo::sizes_query(BLAS, fast(), &g);
         let need = device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &[2]).expect("sizes").acceleration_structure_size;
         let dst = create(&device, BLAS, need - 1);
         let mut s = vec![0u8; BIG as usize];
@@ -737,7 +729,7 @@ rules! {
     scratch_too_small: vuid("VUID-vkBuildAccelerationStructuresKHR-pInfos-03725"), info(1) => {
         let device = Device::new();
         let g = [tri_geom()];
-        let probe = BuildGeometryInfo { ty: BLAS, flags: fast(), mode: vk::BuildAccelerationStructureModeKHR::BUILD, src: None, dst: None, geometries: &g, scratch: None };
+        let probe = BuildGeometryInfo::sizes_query(BLAS, fast(), &g);
         let need = device.build_sizes(vk::AccelerationStructureBuildTypeKHR::HOST, &probe, &[2]).expect("sizes").build_scratch_size;
         let dst = create(&device, BLAS, BIG);
         let mut s = vec![0u8; need as usize - 1];

@@ -157,15 +157,11 @@ fn target(device: &Device, m: &Mesh, flags: F) -> Result<Target> {
         &m.indices,
         vk::GeometryFlagsKHR::OPAQUE,
     )];
-    let probe = BuildGeometryInfo {
-        ty: vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+    let probe = BuildGeometryInfo::sizes_query(
+        vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
         flags,
-        mode: vk::BuildAccelerationStructureModeKHR::BUILD,
-        src: None,
-        dst: None,
-        geometries: &geoms,
-        scratch: None,
-    };
+        &geoms,
+    );
     let sizes = device
         .build_sizes(
             vk::AccelerationStructureBuildTypeKHR::HOST,

@@ -131,6 +131,25 @@ impl<'a> BuildGeometryInfo<'a> {
             scratch: Some(scratch),
         }
     }
+
+    /// The info `vkGetAccelerationStructureBuildSizesKHR` reads: what a build of
+    /// `geometries` would be (mode `BUILD`), with no structures and no scratch, which the query
+    /// ignores.
+    pub fn sizes_query(
+        ty: vk::AccelerationStructureTypeKHR,
+        flags: vk::BuildAccelerationStructureFlagsKHR,
+        geometries: &'a [Geometry<'a>],
+    ) -> Self {
+        BuildGeometryInfo {
+            ty,
+            flags,
+            mode: vk::BuildAccelerationStructureModeKHR::BUILD,
+            src: None,
+            dst: None,
+            geometries,
+            scratch: None,
+        }
+    }
 }
 
 /// `VkAccelerationStructureBuildRangeInfoKHR`.
