@@ -2,7 +2,7 @@
 //! update).
 
 use super::validate;
-use crate::build::{self, Preset, PrimRef};
+use crate::build::{self, Algorithm, Preset, PrimRef};
 use crate::device::{AccelerationStructure, AsObject, Device};
 use crate::error::{Error, Location, Result};
 use crate::input::aabbs::AabbReader;
@@ -551,6 +551,28 @@ impl Device {
         };
         let data = &*data;
         self.with_dst_src(dst, None, at, |bytes, _| {
+            if preset.algorithm == Algorithm::Morton
+                && prim_kind == PrimKind::Triangles
+                && stored == n
+            {
+                // Every triangle active (reference `i` is triangle `i`): the Morton builder's
+                // leaves gather the triangles and their ids straight into the structure.
+                let (prims, ids, nodes) = encode::sections(bytes, &plan, TRI_BYTES, stored)?;
+                let cast = |e| internal(&format!("triangle records: {e}"));
+                let tree = build::morton::build_triangles(
+                    refs,
+                    bytemuck::try_cast_slice(data).map_err(cast)?,
+                    bytemuck::try_cast_slice_mut(prims).map_err(cast)?,
+                    ids,
+                    keys,
+                    keys_tmp,
+                    centroids,
+                    preset.max_leaf,
+                    nodes,
+                );
+                encode::encode(bytes, &plan, &fields, &records, &tree)?;
+                return Ok(());
+            }
             // The builders write the nodes straight into the structure.
             let (tree, order) = build::build(
                 &preset,
