@@ -60,20 +60,19 @@ fn center2(r: &PrimRef) -> f32x4 {
     (lo & XYZ) + (hi & XYZ)
 }
 
-/// Bounds of the doubled centroids, over fixed chunks combined in order.
-fn centroid_bounds(refs: &[PrimRef]) -> Box4 {
-    let part = |rs: &[PrimRef]| {
+/// Bounds of the doubled centroids of `src`, over fixed chunks combined in order.
+fn centroid_bounds<G: Gather>(src: &[G::Prim]) -> Box4 {
+    let part = |ps: &[G::Prim]| {
         let mut b = Box4::EMPTY;
-        for r in rs {
-            let c = center2(r);
+        for c in G::centers(ps) {
             b = b.union(Box4 { lo: c, hi: c });
         }
         b
     };
-    if refs.len() <= CHUNK {
-        return part(refs);
+    if src.len() <= CHUNK {
+        return part(src);
     }
-    let parts: Vec<Box4> = refs.par_chunks(CHUNK).map(part).collect();
+    let parts: Vec<Box4> = src.par_chunks(CHUNK).map(part).collect();
     parts.into_iter().fold(Box4::EMPTY, Box4::union)
 }
 
@@ -211,25 +210,25 @@ fn sort_wide(keys: &mut [u64], tmp: &mut [u64], mut h: Hist<WIDE_BUCKETS>) -> Ve
     top
 }
 
-/// Writes the keys `(code, position)` of `refs` (centroids mapped by `lo` and `scale`) and
+/// Writes the keys `(code, position)` of `src` (centroids mapped by `lo` and `scale`) and
 /// returns the histogram of their digit at `shift` (the first sorted by). Centroids lie in
 /// the bounds, so the scaled values are in [0, 1023] (up to rounding below 1024); NaN
 /// converts to i32::MIN, whose low bits are 0.
-fn codes<const B: usize>(
+fn codes<const B: usize, G: Gather>(
     keys: &mut [u64],
-    refs: &[PrimRef],
+    src: &[G::Prim],
     lo: f32x4,
     scale: f32x4,
     shift: u32,
 ) -> Hist<B> {
     keys.par_chunks_mut(CHUNK)
-        .zip(refs.par_chunks(CHUNK))
+        .zip(src.par_chunks(CHUNK))
         .enumerate()
-        .map(move |(ci, (ks, rs))| {
+        .map(move |(ci, (ks, ps))| {
             let mut h = hist_new::<B>();
             let first = (ci * CHUNK) as u64;
-            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
-                let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
+            for (i, (k, c)) in ks.iter_mut().zip(G::centers(ps)).enumerate() {
+                let q = ((c - lo) * scale).fast_trunc_int().to_array();
                 let code = (SPREAD[q[0] as usize & 1023] << 2)
                     | (SPREAD[q[1] as usize & 1023] << 1)
                     | SPREAD[q[2] as usize & 1023];
@@ -303,18 +302,17 @@ pub fn build(
         dst: &mut aux[..n],
         first: 0,
     };
-    build_into(refs, dst, keys, tmp, centroids, max_leaf, nodes)
+    build_into(n, dst, keys, tmp, centroids, max_leaf, nodes)
 }
 
-/// Builds the tree over the triangles `tris` (nine floats each) whose references are `refs`,
-/// reference `i` being triangle `i` (none inactive): the triangles in final order go straight
-/// into `prims`, their indices into `ids` (the structure's primitive sections), so no
-/// reference is copied and no other pass gathers the primitives. The tree is the one
-/// [`build`] makes over `refs`.
+/// Builds the tree over the triangles `tris` (nine floats each, their references as the
+/// decoder makes them, with positions for ids, would be the same tree's input): the triangles
+/// in final order go straight into `prims` and their positions into `ids` (the structure's
+/// primitive sections), so no reference is made or copied, and no other pass gathers the
+/// primitives. The tree is the one [`build`] makes over those references.
 #[allow(clippy::too_many_arguments)]
 pub fn build_triangles(
-    refs: &[PrimRef],
-    tris: &[f32],
+    tris: &[[f32; 9]],
     prims: &mut [[f32; 9]],
     ids: &mut [u32],
     keys: &mut [u64],
@@ -323,18 +321,19 @@ pub fn build_triangles(
     max_leaf: usize,
     nodes: &mut [Node],
 ) -> Tree {
-    let n = refs.len();
+    let n = tris.len();
     let dst = Tris {
         tris,
+        flat: bytemuck::cast_slice(tris),
         prims: &mut prims[..n],
         ids: &mut ids[..n],
         first: 0,
     };
-    build_into(refs, dst, keys, tmp, centroids, max_leaf, nodes)
+    build_into(n, dst, keys, tmp, centroids, max_leaf, nodes)
 }
 
 fn build_into<G: Gather>(
-    refs: &[PrimRef],
+    n: usize,
     mut dst: G,
     keys: &mut [u64],
     tmp: &mut [u64],
@@ -342,11 +341,11 @@ fn build_into<G: Gather>(
     max_leaf: usize,
     nodes: &mut [Node],
 ) -> Tree {
-    let n = refs.len();
     if n == 0 {
         return NodeList::new(nodes).tree(None);
     }
-    let c = centroids.unwrap_or_else(|| centroid_bounds(refs));
+    let src = dst.source();
+    let c = centroids.unwrap_or_else(|| centroid_bounds::<G>(src));
     let ext = c.hi - c.lo;
     let scale = f32x4::from(
         ext.to_array()
@@ -360,13 +359,13 @@ fn build_into<G: Gather>(
     // digits and small ones by three, from the lowest, each pass counting the next digit. All
     // sort by the whole key, whose low half (the position) keeps equal codes in input order.
     let (top, sorted, free) = if n >= MSD_MIN {
-        let h = codes::<BUCKETS>(keys, refs, lo, scale, TOP_SHIFT);
+        let h = codes::<BUCKETS, G>(keys, src, lo, scale, TOP_SHIFT);
         (sort(keys, tmp, h, true), tmp, keys)
     } else if n >= WIDE_MIN {
-        let h = codes::<WIDE_BUCKETS>(keys, refs, lo, scale, 0);
+        let h = codes::<WIDE_BUCKETS, G>(keys, src, lo, scale, 0);
         (sort_wide(keys, tmp, h), keys, tmp)
     } else {
-        let h = codes::<BUCKETS>(keys, refs, lo, scale, 0);
+        let h = codes::<BUCKETS, G>(keys, src, lo, scale, 0);
         (sort(keys, tmp, h, false), tmp, keys)
     };
     // The other array is free now: the differing bits of neighbouring codes, with 32 zeros
@@ -388,6 +387,12 @@ fn build_into<G: Gather>(
 /// Where the leaves put their primitives, in final order, and what they read them from: the
 /// places of sorted positions `first..`.
 trait Gather: Default + Send + Sized {
+    /// A primitive as read.
+    type Prim: Sync;
+    /// The primitives in input order.
+    fn source(&self) -> &[Self::Prim];
+    /// The doubled centroids of `ps` (`lo + hi` of their bounds; lane 3 unspecified).
+    fn centers(ps: &[Self::Prim]) -> impl Iterator<Item = f32x4> + '_;
     /// The places of the first `at` positions and those of the rest.
     fn split_at(self, at: usize) -> (Self, Self);
     /// Gathers the primitives at positions `keys` (the keys' low halves), sorted positions
@@ -403,7 +408,15 @@ struct Refs<'a> {
     first: usize,
 }
 
-impl Gather for Refs<'_> {
+impl<'a> Gather for Refs<'a> {
+    type Prim = PrimRef;
+    fn source(&self) -> &[PrimRef] {
+        self.refs
+    }
+    #[inline(always)]
+    fn centers(rs: &[PrimRef]) -> impl Iterator<Item = f32x4> + '_ {
+        rs.iter().map(center2)
+    }
     fn split_at(self, at: usize) -> (Self, Self) {
         let (a, b) = self.dst.split_at_mut(at.min(self.dst.len()));
         let (refs, first) = (self.refs, self.first);
@@ -433,30 +446,60 @@ impl Gather for Refs<'_> {
     }
 }
 
+/// Floats `i..i + 4` of `w` (a vertex at `i` in lanes 0..3: one load).
+#[inline(always)]
+fn load4(w: &[f32], i: usize) -> f32x4 {
+    f32x4::from(<[f32; 4]>::try_from(&w[i..i + 4]).unwrap_or_default())
+}
+
+/// The vertex at float `i` of triangle `t` (lane 3 zero).
+#[inline(always)]
+fn vertex(t: &[f32; 9], i: usize) -> f32x4 {
+    f32x4::from([t[i], t[i + 1], t[i + 2], 0.0])
+}
+
 /// Triangles gathered from `tris` into `prims`, their positions into `ids`.
 #[derive(Default)]
 struct Tris<'a> {
-    /// Nine floats per triangle.
-    tris: &'a [f32],
+    tris: &'a [[f32; 9]],
+    /// `tris` as one run of floats.
+    flat: &'a [f32],
     prims: &'a mut [[f32; 9]],
     ids: &'a mut [u32],
     first: usize,
 }
 
 impl Gather for Tris<'_> {
+    type Prim = [f32; 9];
+    fn source(&self) -> &[[f32; 9]] {
+        self.tris
+    }
+    #[inline(always)]
+    fn centers(ts: &[[f32; 9]]) -> impl Iterator<Item = f32x4> + '_ {
+        let flat: &[f32] = bytemuck::cast_slice(ts);
+        ts.iter().enumerate().map(move |(i, t)| {
+            let b = match flat.get(9 * i..9 * i + 10) {
+                Some(w) => Box4::triangle(load4(w, 0), load4(w, 3), load4(w, 6)),
+                None => Box4::triangle(vertex(t, 0), vertex(t, 3), vertex(t, 6)),
+            };
+            b.lo + b.hi
+        })
+    }
     fn split_at(self, at: usize) -> (Self, Self) {
         let (p, q) = self.prims.split_at_mut(at.min(self.prims.len()));
         let (i, j) = self.ids.split_at_mut(at.min(self.ids.len()));
-        let (tris, first) = (self.tris, self.first);
+        let (tris, flat, first) = (self.tris, self.flat, self.first);
         (
             Tris {
                 tris,
+                flat,
                 prims: p,
                 ids: i,
                 first,
             },
             Tris {
                 tris,
+                flat,
                 prims: q,
                 ids: j,
                 first: first + at,
@@ -478,19 +521,15 @@ impl Gather for Tris<'_> {
             let first = 9 * at as usize;
             // Each vertex one load of four floats (but the last triangle's last vertex, whose
             // fourth float would lie past the end).
-            let tri = match self.tris.get(first..first + 10) {
+            let tri = match self.flat.get(first..first + 10) {
                 Some(t) => {
-                    let load = |i: usize| {
-                        f32x4::from(<[f32; 4]>::try_from(&t[i..i + 4]).unwrap_or_default())
-                    };
                     p.copy_from_slice(&t[..9]);
-                    Box4::triangle(load(0), load(3), load(6))
+                    Box4::triangle(load4(t, 0), load4(t, 3), load4(t, 6))
                 }
                 None => {
-                    let t = self.tris.get(first..first + 9).unwrap_or(&[0.0; 9]);
-                    let load = |i: usize| f32x4::from([t[i], t[i + 1], t[i + 2], 0.0]);
-                    p.copy_from_slice(t);
-                    Box4::triangle(load(0), load(3), load(6))
+                    let t = self.tris.get(at as usize).unwrap_or(&[0.0; 9]);
+                    *p = *t;
+                    Box4::triangle(vertex(t, 0), vertex(t, 3), vertex(t, 6))
                 }
             };
             *id = at;
