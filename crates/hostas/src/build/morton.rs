@@ -476,12 +476,11 @@ impl Gather for Tris<'_> {
     }
     #[inline(always)]
     fn centers(ts: &[[f32; 9]]) -> impl Iterator<Item = f32x4> + '_ {
-        let flat: &[f32] = bytemuck::cast_slice(ts);
-        ts.iter().enumerate().map(move |(i, t)| {
-            let b = match flat.get(9 * i..9 * i + 10) {
-                Some(w) => Box4::triangle(load4(w, 0), load4(w, 3), load4(w, 6)),
-                None => Box4::triangle(vertex(t, 0), vertex(t, 3), vertex(t, 6)),
-            };
+        ts.iter().map(|t| {
+            // The last vertex from floats 5..9, rotated (the first two from one load each).
+            let c = load4(t, 5).to_array();
+            let c = f32x4::from([c[1], c[2], c[3], c[0]]);
+            let b = Box4::triangle(load4(t, 0), load4(t, 3), c);
             b.lo + b.hi
         })
     }
