@@ -452,12 +452,6 @@ fn load4(w: &[f32], i: usize) -> f32x4 {
     f32x4::from(<[f32; 4]>::try_from(&w[i..i + 4]).unwrap_or_default())
 }
 
-/// The vertex at float `i` of triangle `t` (lane 3 zero).
-#[inline(always)]
-fn vertex(t: &[f32; 9], i: usize) -> f32x4 {
-    f32x4::from([t[i], t[i + 1], t[i + 2], 0.0])
-}
-
 /// Triangles gathered from `tris` into `prims`, their positions into `ids`.
 #[derive(Default)]
 struct Tris<'a> {
@@ -526,9 +520,10 @@ impl Gather for Tris<'_> {
                     Box4::triangle(load4(t, 0), load4(t, 3), load4(t, 6))
                 }
                 None => {
-                    let t = self.tris.get(at as usize).unwrap_or(&[0.0; 9]);
-                    *p = *t;
-                    Box4::triangle(vertex(t, 0), vertex(t, 3), vertex(t, 6))
+                    let t = self.flat.get(first..first + 9).unwrap_or(&[0.0; 9]);
+                    p.copy_from_slice(t);
+                    let v = |i: usize| f32x4::from([t[i], t[i + 1], t[i + 2], 0.0]);
+                    Box4::triangle(v(0), v(3), v(6))
                 }
             };
             *id = at;
