@@ -221,12 +221,15 @@ fn codes<const B: usize, G: Gather>(
     scale: f32x4,
     shift: u32,
 ) -> Hist<B> {
-    keys.par_chunks_mut(CHUNK)
-        .zip(src.par_chunks(CHUNK))
+    // One chunk per thread at most: each is a histogram to zero and add (the counts do not
+    // depend on the chunks).
+    let chunk = keys.len().div_ceil(rayon::current_num_threads()).max(CHUNK);
+    keys.par_chunks_mut(chunk)
+        .zip(src.par_chunks(chunk))
         .enumerate()
         .map(move |(ci, (ks, ps))| {
             let mut h = hist_new::<B>();
-            let first = (ci * CHUNK) as u64;
+            let first = (ci * chunk) as u64;
             for (i, (k, c)) in ks.iter_mut().zip(G::centers(ps)).enumerate() {
                 let q = ((c - lo) * scale).fast_trunc_int().to_array();
                 let code = (SPREAD[q[0] as usize & 1023] << 2)
