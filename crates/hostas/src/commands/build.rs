@@ -830,18 +830,10 @@ fn decode_geometries(
                         let outs: &mut [[u8; TRI_BYTES]] = bytemuck::try_cast_slice_mut(chunk)
                             .map_err(|_| internal("triangle slots"))?;
                         let first = first + base;
-                        let rs = (chunk_refs, refs_too);
-                        let (dead, cb) = match F32Tris::new(t) {
-                            Some(F32Tris::I0(d)) => d.decode(t, base, first, outs, rs),
-                            Some(F32Tris::I2(d)) => d.decode(t, base, first, outs, rs),
-                            Some(F32Tris::I4(d)) => d.decode(t, base, first, outs, rs),
-                            Some(F32Tris::I0S(d)) => d.decode(t, base, first, outs, rs),
-                            Some(F32Tris::I2S(d)) => d.decode(t, base, first, outs, rs),
-                            Some(F32Tris::I4S(d)) => d.decode(t, base, first, outs, rs),
-                            None => {
-                                let tris = (base..).map(|p| reader_tri(t, p));
-                                decode_tris(tris, t, base, first, outs, rs)
-                            }
+                        let (dead, cb) = if refs_too {
+                            decode_chunk::<true>(t, base, first, outs, chunk_refs)
+                        } else {
+                            decode_chunk::<false>(t, base, first, outs, chunk_refs)
                         }?;
                         (inactive, centroids) = (dead, cb);
                     }
@@ -895,6 +887,29 @@ fn decode_geometries(
         }
     }
     Ok((stored, centroids))
+}
+
+/// Decodes triangles `base..` of `t` as [`decode_tris`] does, by the fastest means for
+/// its layout.
+fn decode_chunk<const REFS: bool>(
+    t: &TriangleReader,
+    base: usize,
+    first: usize,
+    outs: &mut [[u8; TRI_BYTES]],
+    refs: &mut [PrimRef],
+) -> Result<(usize, Option<Box4>)> {
+    match F32Tris::new(t) {
+        Some(F32Tris::I0(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I2(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I4(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I0S(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I2S(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I4S(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        None => {
+            let tris = (base..).map(|p| reader_tri(t, p));
+            decode_tris::<REFS>(tris, t, base, first, outs, refs)
+        }
+    }
 }
 
 /// A vertex in lanes 0..3 (lane 3 zero).
@@ -1002,19 +1017,19 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
     /// Decodes triangles `base..` as [`decode_tris`] does, reading the index records of the
     /// whole run in order (each triangle's own range test is the bounds check of the run).
     #[inline(always)]
-    fn decode(
+    fn decode<const REFS: bool>(
         &self,
         t: &TriangleReader,
         base: usize,
         first: usize,
         outs: &mut [[u8; TRI_BYTES]],
-        refs: (&mut [PrimRef], bool),
+        refs: &mut [PrimRef],
     ) -> Result<(usize, Option<Box4>)> {
         // (A copy: the loop then keeps the layout in registers.)
         let g = *self;
         if IDX == 0 {
             let tris = (base..).map(move |p| g.tri([3 * p, 3 * p + 1, 3 * p + 2]));
-            return decode_tris(tris, t, base, first, outs, refs);
+            return decode_tris::<REFS>(tris, t, base, first, outs, refs);
         }
         let size = 3 * IDX;
         let u = |b: &[u8], k: usize| -> usize {
@@ -1029,12 +1044,12 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
                 let tris = records
                     .chunks_exact(size)
                     .map(move |b| g.tri([u(b, 0), u(b, 1), u(b, 2)]));
-                decode_tris(tris, t, base, first, outs, refs)
+                decode_tris::<REFS>(tris, t, base, first, outs, refs)
             }
             // Index records past the buffer: the reader reports them.
             None => {
                 let tris = (base..).map(|p| reader_tri(t, p));
-                decode_tris(tris, t, base, first, outs, refs)
+                decode_tris::<REFS>(tris, t, base, first, outs, refs)
             }
         }
     }
@@ -1066,21 +1081,21 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
     }
 }
 
-/// Decodes triangles `base..` of `t` into `outs` and, when `refs.1`, their references
-/// (sequence numbers from `first`) into `refs.0`; returns how many are inactive and the bounds of the active ones'
+/// Decodes triangles `base..` of `t` into `outs` and, when `REFS`, their references
+/// (sequence numbers from `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
 /// doubled centroids (`lo + hi`, lane 3 zero), united in order as the Morton builder would
 /// (saving it a pass over the references), or `None` when a centroid has a NaN lane (then the
 /// result depends on the grouping). `tris` decodes the common cases in order, the reader the
 /// others (and reports what is wrong). (Not inlined: inside the caller's closure the sums
 /// stay in memory.)
 #[inline(never)]
-fn decode_tris(
+fn decode_tris<const REFS: bool>(
     tris: impl Iterator<Item = Option<[f32x4; 3]>>,
     t: &TriangleReader,
     base: usize,
     first: usize,
     outs: &mut [[u8; TRI_BYTES]],
-    (refs, refs_too): (&mut [PrimRef], bool),
+    refs: &mut [PrimRef],
 ) -> Result<(usize, Option<Box4>)> {
     let mut inactive = 0;
     let mut centroids = Box4::EMPTY;
@@ -1095,10 +1110,10 @@ fn decode_tris(
         out[12..28].copy_from_slice(&bytes(b));
         out[24..].copy_from_slice(&bytes(c)[..12]);
         let (lo, hi) = ref_bounds(a, b, c);
-        if refs_too {
+        if REFS {
             *r = tri_ref(lo, hi, id, dead);
+            id += next;
         }
-        id += next;
         if dead {
             inactive += 1;
         } else {
