@@ -3,8 +3,8 @@
 //! filling 8-wide nodes. Bounds are computed bottom-up, so the whole build is a few linear passes.
 //!
 //! The passes: centroid bounds (unless the decoder computed them); keys `(code, position)` with the first digit's histogram;
-//! the radix sort; the tree, whose leaves gather their references from `refs` in sorted order
-//! into `aux` (their final place) while computing their bounds.
+//! the radix sort; the tree, whose leaves gather their primitives in sorted order into their
+//! final place while computing their bounds (see [`Gather`]).
 
 use super::tree::{Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -60,20 +60,19 @@ fn center2(r: &PrimRef) -> f32x4 {
     (lo & XYZ) + (hi & XYZ)
 }
 
-/// Bounds of the doubled centroids, over fixed chunks combined in order.
-fn centroid_bounds(refs: &[PrimRef]) -> Box4 {
-    let part = |rs: &[PrimRef]| {
+/// Bounds of the doubled centroids of `src`, over fixed chunks combined in order.
+fn centroid_bounds<G: Gather>(src: &[G::Prim]) -> Box4 {
+    let part = |ps: &[G::Prim]| {
         let mut b = Box4::EMPTY;
-        for r in rs {
-            let c = center2(r);
+        for c in G::centers(ps) {
             b = b.union(Box4 { lo: c, hi: c });
         }
         b
     };
-    if refs.len() <= CHUNK {
-        return part(refs);
+    if src.len() <= CHUNK {
+        return part(src);
     }
-    let parts: Vec<Box4> = refs.par_chunks(CHUNK).map(part).collect();
+    let parts: Vec<Box4> = src.par_chunks(CHUNK).map(part).collect();
     parts.into_iter().fold(Box4::EMPTY, Box4::union)
 }
 
@@ -211,25 +210,28 @@ fn sort_wide(keys: &mut [u64], tmp: &mut [u64], mut h: Hist<WIDE_BUCKETS>) -> Ve
     top
 }
 
-/// Writes the keys `(code, position)` of `refs` (centroids mapped by `lo` and `scale`) and
+/// Writes the keys `(code, position)` of `src` (centroids mapped by `lo` and `scale`) and
 /// returns the histogram of their digit at `shift` (the first sorted by). Centroids lie in
 /// the bounds, so the scaled values are in [0, 1023] (up to rounding below 1024); NaN
 /// converts to i32::MIN, whose low bits are 0.
-fn codes<const B: usize>(
+fn codes<const B: usize, G: Gather>(
     keys: &mut [u64],
-    refs: &[PrimRef],
+    src: &[G::Prim],
     lo: f32x4,
     scale: f32x4,
     shift: u32,
 ) -> Hist<B> {
-    keys.par_chunks_mut(CHUNK)
-        .zip(refs.par_chunks(CHUNK))
+    // One chunk per thread at most: each is a histogram to zero and add (the counts do not
+    // depend on the chunks).
+    let chunk = keys.len().div_ceil(rayon::current_num_threads()).max(CHUNK);
+    keys.par_chunks_mut(chunk)
+        .zip(src.par_chunks(chunk))
         .enumerate()
-        .map(move |(ci, (ks, rs))| {
+        .map(move |(ci, (ks, ps))| {
             let mut h = hist_new::<B>();
-            let first = (ci * CHUNK) as u64;
-            for (i, (k, r)) in ks.iter_mut().zip(rs).enumerate() {
-                let q = ((center2(r) - lo) * scale).fast_trunc_int().to_array();
+            let first = (ci * chunk) as u64;
+            for (i, (k, c)) in ks.iter_mut().zip(G::centers(ps)).enumerate() {
+                let q = ((c - lo) * scale).fast_trunc_int().to_array();
                 let code = (SPREAD[q[0] as usize & 1023] << 2)
                     | (SPREAD[q[1] as usize & 1023] << 1)
                     | SPREAD[q[2] as usize & 1023];
@@ -298,10 +300,55 @@ pub fn build(
     nodes: &mut [Node],
 ) -> Tree {
     let n = refs.len();
+    let dst = Refs {
+        refs,
+        dst: &mut aux[..n],
+        first: 0,
+    };
+    build_into(n, dst, keys, tmp, centroids, max_leaf, nodes)
+}
+
+/// Builds the tree over the triangles `tris` (nine floats each, their references as the
+/// decoder makes them, with positions for ids, would be the same tree's input): the triangles
+/// in final order go straight into `prims` and their positions into `ids` (the structure's
+/// primitive sections), so no reference is made or copied, and no other pass gathers the
+/// primitives. The tree is the one [`build`] makes over those references.
+#[allow(clippy::too_many_arguments)]
+pub fn build_triangles(
+    tris: &[[f32; 9]],
+    prims: &mut [[f32; 9]],
+    ids: &mut [u32],
+    keys: &mut [u64],
+    tmp: &mut [u64],
+    centroids: Option<Box4>,
+    max_leaf: usize,
+    nodes: &mut [Node],
+) -> Tree {
+    let n = tris.len();
+    let dst = Tris {
+        tris,
+        flat: bytemuck::cast_slice(tris),
+        prims: &mut prims[..n],
+        ids: &mut ids[..n],
+        first: 0,
+    };
+    build_into(n, dst, keys, tmp, centroids, max_leaf, nodes)
+}
+
+fn build_into<G: Gather>(
+    n: usize,
+    mut dst: G,
+    keys: &mut [u64],
+    tmp: &mut [u64],
+    centroids: Option<Box4>,
+    max_leaf: usize,
+    nodes: &mut [Node],
+) -> Tree {
     if n == 0 {
         return NodeList::new(nodes).tree(None);
     }
-    let c = centroids.unwrap_or_else(|| centroid_bounds(refs));
+    let src = dst.source();
+    let c = centroids.unwrap_or_else(|| centroid_bounds::<G>(src));
     let ext = c.hi - c.lo;
     let scale = f32x4::from(
         ext.to_array()
@@ -310,19 +357,18 @@ pub fn build(
     let lo = c.lo;
     let keys = &mut keys[..n];
     let tmp = &mut tmp[..n];
-    let aux = &mut aux[..n];
     // Large inputs are sorted by the top digit first (one pass through memory) and then each
     // top bucket by the two lower digits where it sits in the caches; middle ones by two wide
     // digits and small ones by three, from the lowest, each pass counting the next digit. All
     // sort by the whole key, whose low half (the position) keeps equal codes in input order.
     let (top, sorted, free) = if n >= MSD_MIN {
-        let h = codes::<BUCKETS>(keys, refs, lo, scale, TOP_SHIFT);
+        let h = codes::<BUCKETS, G>(keys, src, lo, scale, TOP_SHIFT);
         (sort(keys, tmp, h, true), tmp, keys)
     } else if n >= WIDE_MIN {
-        let h = codes::<WIDE_BUCKETS>(keys, refs, lo, scale, 0);
+        let h = codes::<WIDE_BUCKETS, G>(keys, src, lo, scale, 0);
         (sort_wide(keys, tmp, h), keys, tmp)
     } else {
-        let h = codes::<BUCKETS>(keys, refs, lo, scale, 0);
+        let h = codes::<BUCKETS, G>(keys, src, lo, scale, 0);
         (sort(keys, tmp, h, false), tmp, keys)
     };
     // The other array is free now: the differing bits of neighbouring codes, with 32 zeros
@@ -332,22 +378,169 @@ pub fn build(
     deltas(sorted, &mut delta[..n]);
     let ctx = Ctx {
         keys: sorted,
-        refs,
         top: &top,
         delta,
         leaf_max: max_leaf.max(WIDTH - 1),
     };
     let mut out = NodeList::new(nodes);
-    let (b, c) = ctx.build(0, aux, 0, &mut out);
+    let (b, c) = ctx.build(0, n, &mut dst, 0, &mut out);
     out.tree(Some((b.aabb(), c)))
+}
+
+/// Where the leaves put their primitives, in final order, and what they read them from: the
+/// places of sorted positions `first..`.
+trait Gather: Default + Send + Sized {
+    /// A primitive as read.
+    type Prim: Sync;
+    /// The primitives in input order.
+    fn source(&self) -> &[Self::Prim];
+    /// The doubled centroids of `ps` (`lo + hi` of their bounds; lane 3 unspecified).
+    fn centers(ps: &[Self::Prim]) -> impl Iterator<Item = f32x4> + '_;
+    /// The places of the first `at` positions and those of the rest.
+    fn split_at(self, at: usize) -> (Self, Self);
+    /// Gathers the primitives at positions `keys` (the keys' low halves), sorted positions
+    /// `base..`, into their places and returns their bounds.
+    fn leaf(&mut self, base: usize, keys: &[u64]) -> Box4;
+}
+
+/// References gathered from `refs` into `dst`.
+#[derive(Default)]
+struct Refs<'a> {
+    refs: &'a [PrimRef],
+    dst: &'a mut [PrimRef],
+    first: usize,
+}
+
+impl<'a> Gather for Refs<'a> {
+    type Prim = PrimRef;
+    fn source(&self) -> &[PrimRef] {
+        self.refs
+    }
+    #[inline(always)]
+    fn centers(rs: &[PrimRef]) -> impl Iterator<Item = f32x4> + '_ {
+        rs.iter().map(center2)
+    }
+    fn split_at(self, at: usize) -> (Self, Self) {
+        let (a, b) = self.dst.split_at_mut(at.min(self.dst.len()));
+        let (refs, first) = (self.refs, self.first);
+        (
+            Refs {
+                refs,
+                dst: a,
+                first,
+            },
+            Refs {
+                refs,
+                dst: b,
+                first: first + at,
+            },
+        )
+    }
+    #[inline(always)]
+    fn leaf(&mut self, base: usize, keys: &[u64]) -> Box4 {
+        let mut b = Box4::EMPTY;
+        let dst = self.dst.iter_mut().skip(base - self.first);
+        for (d, &k) in dst.zip(keys) {
+            let r = self.refs[k as u32 as usize];
+            *d = r;
+            b = b.union(r.box4());
+        }
+        b
+    }
+}
+
+/// Floats `i..i + 4` of `w` (a vertex at `i` in lanes 0..3: one load).
+#[inline(always)]
+fn load4(w: &[f32], i: usize) -> f32x4 {
+    f32x4::from(<[f32; 4]>::try_from(&w[i..i + 4]).unwrap_or_default())
+}
+
+/// Triangles gathered from `tris` into `prims`, their positions into `ids`.
+#[derive(Default)]
+struct Tris<'a> {
+    tris: &'a [[f32; 9]],
+    /// `tris` as one run of floats.
+    flat: &'a [f32],
+    prims: &'a mut [[f32; 9]],
+    ids: &'a mut [u32],
+    first: usize,
+}
+
+impl Gather for Tris<'_> {
+    type Prim = [f32; 9];
+    fn source(&self) -> &[[f32; 9]] {
+        self.tris
+    }
+    #[inline(always)]
+    fn centers(ts: &[[f32; 9]]) -> impl Iterator<Item = f32x4> + '_ {
+        ts.iter().map(|t| {
+            // The last vertex from floats 5..9, rotated (the first two from one load each).
+            let c = load4(t, 5).to_array();
+            let c = f32x4::from([c[1], c[2], c[3], c[0]]);
+            let b = Box4::triangle(load4(t, 0), load4(t, 3), c);
+            b.lo + b.hi
+        })
+    }
+    fn split_at(self, at: usize) -> (Self, Self) {
+        let (p, q) = self.prims.split_at_mut(at.min(self.prims.len()));
+        let (i, j) = self.ids.split_at_mut(at.min(self.ids.len()));
+        let (tris, flat, first) = (self.tris, self.flat, self.first);
+        (
+            Tris {
+                tris,
+                flat,
+                prims: p,
+                ids: i,
+                first,
+            },
+            Tris {
+                tris,
+                flat,
+                prims: q,
+                ids: j,
+                first: first + at,
+            },
+        )
+    }
+    #[inline(always)]
+    fn leaf(&mut self, base: usize, keys: &[u64]) -> Box4 {
+        let mut bounds = Box4::EMPTY;
+        let at = base - self.first;
+        let (Some(prims), Some(ids)) = (
+            self.prims.get_mut(at..at + keys.len()),
+            self.ids.get_mut(at..at + keys.len()),
+        ) else {
+            return bounds;
+        };
+        for ((p, id), &k) in prims.iter_mut().zip(ids).zip(keys) {
+            let at = k as u32;
+            let first = 9 * at as usize;
+            // Each vertex one load of four floats (but the last triangle's last vertex, whose
+            // fourth float would lie past the end).
+            let tri = match self.flat.get(first..first + 10) {
+                Some(t) => {
+                    p.copy_from_slice(&t[..9]);
+                    Box4::triangle(load4(t, 0), load4(t, 3), load4(t, 6))
+                }
+                None => {
+                    let t = self.flat.get(first..first + 9).unwrap_or(&[0.0; 9]);
+                    p.copy_from_slice(t);
+                    let v = |i: usize| f32x4::from([t[i], t[i + 1], t[i + 2], 0.0]);
+                    Box4::triangle(v(0), v(3), v(6))
+                }
+            };
+            *id = at;
+            // The reference's bounds, as the decoder made them (lane 3 aside).
+            bounds = bounds.union(tri);
+        }
+        bounds
+    }
 }
 
 /// What every level of the tree reads.
 struct Ctx<'a> {
     /// Sorted keys: code in the high half, position in `refs` in the low half.
     keys: &'a [u64],
-    /// The references in input order.
-    refs: &'a [PrimRef],
     /// Start of each top digit in the sorted order, then `n`.
     top: &'a [u32],
     /// Per sorted position, 1 + the highest bit in which its code and the next differ (0:
@@ -363,6 +556,7 @@ struct Ctx<'a> {
 /// are looked up, not searched for (the searches at the top levels miss the caches). `delta`
 /// holds per sorted position the highest differing bit (plus one) between its code and the
 /// next: in a short range the split is where it equals the range's highest differing bit.
+#[inline(always)]
 fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
     let n = keys.len();
     let (first, last) = ((keys[0] >> 32) as u32, (keys[n - 1] >> 32) as u32);
@@ -414,19 +608,6 @@ fn split_point(keys: &[u64], base: usize, top: &[u32], delta: &[u8]) -> usize {
     keys.partition_point(|&k| k < t)
 }
 
-/// A leaf over sorted positions `keys`: gathers the references into `dst` and returns their
-/// bounds.
-#[inline(always)]
-fn leaf(keys: &[u64], refs: &[PrimRef], dst: &mut [PrimRef]) -> Box4 {
-    let mut b = Box4::EMPTY;
-    for (d, &k) in dst.iter_mut().zip(keys) {
-        let r = refs[k as u32 as usize];
-        *d = r;
-        b = b.union(r.box4());
-    }
-    b
-}
-
 /// Writes child `k` of `node`.
 #[inline(always)]
 fn set_child(node: &mut Node, k: usize, b: &Box4, c: Child) {
@@ -441,23 +622,23 @@ fn set_child(node: &mut Node, k: usize, b: &Box4, c: Child) {
 }
 
 impl Ctx<'_> {
-    /// Builds the subtree over sorted positions `base..base + dst.len()`, gathering their
-    /// references into `dst` as its leaves read them.
-    fn build(
+    /// Builds the subtree over sorted positions `base..base + n`, gathering their primitives
+    /// into `dst` as its leaves read them.
+    fn build<G: Gather>(
         &self,
         base: usize,
-        dst: &mut [PrimRef],
+        n: usize,
+        dst: &mut G,
         depth: u32,
         out: &mut NodeList,
     ) -> (Box4, Child) {
-        let n = dst.len();
         let keys = &self.keys[base..base + n];
         if n <= self.leaf_max {
             let c = Child::Leaf {
                 first: base as u32,
                 count: n as u32,
             };
-            return (leaf(keys, self.refs, dst), c);
+            return (dst.leaf(base, keys), c);
         }
         // The parts by when they were made (a split's left half keeps its part's number, the
         // right half takes the next one): where each starts, which follows it in position
@@ -508,18 +689,19 @@ impl Ctx<'_> {
         let mut node = Node::EMPTY;
         let mut bounds = Box4::EMPTY;
         if n > PARALLEL_THRESHOLD && rayon::current_num_threads() > 1 {
+            // (The pieces take all of `dst`'s places: this subtree fills them.)
             let mut pieces = Vec::with_capacity(live);
-            let (mut rest, mut s) = (dst, 0);
+            let (mut rest, mut s) = (std::mem::take(dst), 0);
             for &e in &ends[..live] {
-                let (mine, tail) = std::mem::take(&mut rest).split_at_mut(e - s);
-                pieces.push((s, mine));
+                let (mine, tail) = rest.split_at(e - s);
+                pieces.push((s, e - s, mine));
                 (rest, s) = (tail, e);
             }
             let built: Vec<(Box4, Child, NodeList)> = pieces
                 .into_par_iter()
-                .map(|(s, d)| {
-                    let mut sub = NodeList::with_capacity(node_hint(d.len()));
-                    let (b, c) = self.build(base + s, d, depth + 1, &mut sub);
+                .map(|(s, m, mut d)| {
+                    let mut sub = NodeList::with_capacity(node_hint(m));
+                    let (b, c) = self.build(base + s, m, &mut d, depth + 1, &mut sub);
                     (b, c, sub)
                 })
                 .collect();
@@ -529,22 +711,21 @@ impl Ctx<'_> {
                 bounds = bounds.union(b);
             }
         } else {
-            let (mut rest, mut s) = (dst, 0);
+            let mut s = 0;
             for (k, &e) in ends[..live].iter().enumerate() {
-                let (mine, tail) = std::mem::take(&mut rest).split_at_mut(e - s);
                 // Leaves inline: a returned child read back at once stalls on store forwarding.
                 let (b, c) = if e - s <= self.leaf_max {
                     let c = Child::Leaf {
                         first: (base + s) as u32,
                         count: (e - s) as u32,
                     };
-                    (leaf(&keys[s..e], self.refs, mine), c)
+                    (dst.leaf(base + s, &keys[s..e]), c)
                 } else {
-                    self.build(base + s, mine, depth + 1, out)
+                    self.build(base + s, e - s, dst, depth + 1, out)
                 };
                 set_child(&mut node, k, &b, c);
                 bounds = bounds.union(b);
-                (rest, s) = (tail, e);
+                s = e;
             }
         }
         out.set(me, node);

@@ -2,7 +2,7 @@
 //! update).
 
 use super::validate;
-use crate::build::{self, Preset, PrimRef};
+use crate::build::{self, Algorithm, Preset, PrimRef};
 use crate::device::{AccelerationStructure, AsObject, Device};
 use crate::error::{Error, Location, Result};
 use crate::input::aabbs::AabbReader;
@@ -507,7 +507,10 @@ impl Device {
         } = carve_scratch(scratch, n, prim_kind.prim_size() as usize)?;
 
         // Decode every primitive into scratch, by sequence number; inactive ones get no ref.
-        // Triangles come with the bounds of their centroids (for the Morton builder).
+        // Triangles come with the bounds of their centroids (for the Morton builder), which
+        // reads them from scratch as they are when all are active (see `decode_geometries`).
+        let preset = Preset::from_flags(flags);
+        let tris_direct = prim_kind == PrimKind::Triangles && preset.algorithm == Algorithm::Morton;
         let mut centroids = None;
         let stored = match prim_kind {
             PrimKind::Instances => {
@@ -531,13 +534,13 @@ impl Device {
                 stored
             }
             PrimKind::Triangles | PrimKind::Aabbs => {
-                let (stored, cb) = decode_geometries(&readers, &records, refs, data)?;
+                let (stored, cb) = decode_geometries(&readers, &records, refs, data, !tris_direct)?;
                 centroids = cb;
                 stored
             }
             PrimKind::None => 0,
         };
-        let preset = Preset::from_flags(flags);
+        let tris_direct = tris_direct && stored == n && centroids.is_some();
         let refs = &mut refs[..stored];
 
         let fields = HeaderFields {
@@ -551,6 +554,24 @@ impl Device {
         };
         let data = &*data;
         self.with_dst_src(dst, None, at, |bytes, _| {
+            if tris_direct {
+                // The Morton builder reads the triangles, and its leaves gather them and their
+                // ids straight into the structure.
+                let (prims, ids, nodes) = encode::sections(bytes, &plan, TRI_BYTES, stored)?;
+                let cast = |e| internal(&format!("triangle records: {e}"));
+                let tree = build::morton::build_triangles(
+                    bytemuck::try_cast_slice(data).map_err(cast)?,
+                    bytemuck::try_cast_slice_mut(prims).map_err(cast)?,
+                    ids,
+                    keys,
+                    keys_tmp,
+                    centroids,
+                    preset.max_leaf,
+                    nodes,
+                );
+                encode::encode(bytes, &plan, &fields, &records, &tree)?;
+                return Ok(());
+            }
             // The builders write the nodes straight into the structure.
             let (tree, order) = build::build(
                 &preset,
@@ -771,11 +792,16 @@ fn carve_scratch(scratch: &mut [u8], n: usize, prim_size: usize) -> Result<Scrat
 ///
 /// Each primitive's reference is first written at its sequence number (an inactive one marked
 /// by `pad = 1`); when some are inactive, one pass then closes the gaps in order.
+///
+/// Without `refs_too`, triangles get their references only where some are inactive or the
+/// centroids' bounds are unknown (made from `data` then, as decoding makes them): otherwise
+/// the Morton builder reads the decoded triangles instead.
 fn decode_geometries(
     readers: &[Reader],
     records: &[GeometryRecord],
     refs: &mut [PrimRef],
     data: &mut [u8],
+    refs_too: bool,
 ) -> Result<(usize, Option<Box4>)> {
     const CHUNK: usize = 4096;
     let mut inactive = 0usize;
@@ -804,17 +830,10 @@ fn decode_geometries(
                         let outs: &mut [[u8; TRI_BYTES]] = bytemuck::try_cast_slice_mut(chunk)
                             .map_err(|_| internal("triangle slots"))?;
                         let first = first + base;
-                        let (dead, cb) = match F32Tris::new(t) {
-                            Some(F32Tris::I0(d)) => d.decode(t, base, first, outs, chunk_refs),
-                            Some(F32Tris::I2(d)) => d.decode(t, base, first, outs, chunk_refs),
-                            Some(F32Tris::I4(d)) => d.decode(t, base, first, outs, chunk_refs),
-                            Some(F32Tris::I0S(d)) => d.decode(t, base, first, outs, chunk_refs),
-                            Some(F32Tris::I2S(d)) => d.decode(t, base, first, outs, chunk_refs),
-                            Some(F32Tris::I4S(d)) => d.decode(t, base, first, outs, chunk_refs),
-                            None => {
-                                let tris = (base..).map(|p| reader_tri(t, p));
-                                decode_tris(tris, t, base, first, outs, chunk_refs)
-                            }
+                        let (dead, cb) = if refs_too {
+                            decode_chunk::<true>(t, base, first, outs, chunk_refs)
+                        } else {
+                            decode_chunk::<false>(t, base, first, outs, chunk_refs)
                         }?;
                         (inactive, centroids) = (dead, cb);
                     }
@@ -848,6 +867,13 @@ fn decode_geometries(
         }
     }
     let total: usize = records.iter().map(|r| r.primitive_count as usize).sum();
+    let tris = readers.iter().any(|r| matches!(r, Reader::Triangles(_)));
+    if tris && !refs_too {
+        if inactive == 0 && centroids.is_some() {
+            return Ok((total, centroids));
+        }
+        tri_refs(&data[..TRI_BYTES * total], &mut refs[..total])?;
+    }
     if inactive == 0 {
         return Ok((total, centroids));
     }
@@ -861,6 +887,29 @@ fn decode_geometries(
         }
     }
     Ok((stored, centroids))
+}
+
+/// Decodes triangles `base..` of `t` as [`decode_tris`] does, by the fastest means for
+/// its layout.
+fn decode_chunk<const REFS: bool>(
+    t: &TriangleReader,
+    base: usize,
+    first: usize,
+    outs: &mut [[u8; TRI_BYTES]],
+    refs: &mut [PrimRef],
+) -> Result<(usize, Option<Box4>)> {
+    match F32Tris::new(t) {
+        Some(F32Tris::I0(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I2(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I4(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I0S(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I2S(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        Some(F32Tris::I4S(d)) => d.decode::<REFS>(t, base, first, outs, refs),
+        None => {
+            let tris = (base..).map(|p| reader_tri(t, p));
+            decode_tris::<REFS>(tris, t, base, first, outs, refs)
+        }
+    }
 }
 
 /// A vertex in lanes 0..3 (lane 3 zero).
@@ -968,7 +1017,7 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
     /// Decodes triangles `base..` as [`decode_tris`] does, reading the index records of the
     /// whole run in order (each triangle's own range test is the bounds check of the run).
     #[inline(always)]
-    fn decode(
+    fn decode<const REFS: bool>(
         &self,
         t: &TriangleReader,
         base: usize,
@@ -980,7 +1029,7 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
         let g = *self;
         if IDX == 0 {
             let tris = (base..).map(move |p| g.tri([3 * p, 3 * p + 1, 3 * p + 2]));
-            return decode_tris(tris, t, base, first, outs, refs);
+            return decode_tris::<REFS>(tris, t, base, first, outs, refs);
         }
         let size = 3 * IDX;
         let u = |b: &[u8], k: usize| -> usize {
@@ -995,12 +1044,12 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
                 let tris = records
                     .chunks_exact(size)
                     .map(move |b| g.tri([u(b, 0), u(b, 1), u(b, 2)]));
-                decode_tris(tris, t, base, first, outs, refs)
+                decode_tris::<REFS>(tris, t, base, first, outs, refs)
             }
             // Index records past the buffer: the reader reports them.
             None => {
                 let tris = (base..).map(|p| reader_tri(t, p));
-                decode_tris(tris, t, base, first, outs, refs)
+                decode_tris::<REFS>(tris, t, base, first, outs, refs)
             }
         }
     }
@@ -1032,15 +1081,15 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
     }
 }
 
-/// Decodes triangles `base..` of `t` into `outs` and their references (sequence numbers from
-/// `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
+/// Decodes triangles `base..` of `t` into `outs` and, when `REFS`, their references
+/// (sequence numbers from `first`) into `refs`; returns how many are inactive and the bounds of the active ones'
 /// doubled centroids (`lo + hi`, lane 3 zero), united in order as the Morton builder would
 /// (saving it a pass over the references), or `None` when a centroid has a NaN lane (then the
 /// result depends on the grouping). `tris` decodes the common cases in order, the reader the
 /// others (and reports what is wrong). (Not inlined: inside the caller's closure the sums
 /// stay in memory.)
 #[inline(never)]
-fn decode_tris(
+fn decode_tris<const REFS: bool>(
     tris: impl Iterator<Item = Option<[f32x4; 3]>>,
     t: &TriangleReader,
     base: usize,
@@ -1060,13 +1109,11 @@ fn decode_tris(
         out[..16].copy_from_slice(&bytes(a));
         out[12..28].copy_from_slice(&bytes(b));
         out[24..].copy_from_slice(&bytes(c)[..12]);
-        // The bounds as `Aabb::point` and `grow` make them, lane 3 the id (low) and whether
-        // it is inactive (high).
-        let tri = Box4::triangle(a, b, c);
-        let (lo, hi) = (tri.lo & XYZ, tri.hi & XYZ);
-        let mark = if dead { DEAD } else { f32x4::ZERO };
-        *r = bytemuck::cast([lo | bytemuck::cast::<i32x4, f32x4>(id), hi | mark]);
-        id += next;
+        let (lo, hi) = ref_bounds(a, b, c);
+        if REFS {
+            *r = tri_ref(lo, hi, id, dead);
+            id += next;
+        }
         if dead {
             inactive += 1;
         } else {
@@ -1102,6 +1149,41 @@ fn decode_tris(
     }
     let clean = nan.to_bitmask() == 0;
     Ok((inactive, clean.then_some(centroids)))
+}
+
+/// A triangle's bounds as `Aabb::point` and `grow` make them, lane 3 zero.
+#[inline(always)]
+fn ref_bounds(a: f32x4, b: f32x4, c: f32x4) -> (f32x4, f32x4) {
+    let tri = Box4::triangle(a, b, c);
+    (tri.lo & XYZ, tri.hi & XYZ)
+}
+
+/// A triangle's reference from its bounds (lane 3 zero): lane 3 the id (low, lane 3 of `id`)
+/// and whether it is inactive (high).
+#[inline(always)]
+fn tri_ref(lo: f32x4, hi: f32x4, id: i32x4, dead: bool) -> PrimRef {
+    let mark = if dead { DEAD } else { f32x4::ZERO };
+    bytemuck::cast([lo | bytemuck::cast::<i32x4, f32x4>(id), hi | mark])
+}
+
+/// The references of the decoded triangles `data` (an inactive one's first X is NaN), as
+/// [`decode_tris`] makes them.
+fn tri_refs(data: &[u8], refs: &mut [PrimRef]) -> Result<()> {
+    const CHUNK: usize = 4096;
+    let tris: &[[f32; 9]] =
+        bytemuck::try_cast_slice(data).map_err(|_| internal("triangle slots"))?;
+    refs.par_chunks_mut(CHUNK)
+        .zip(tris.par_chunks(CHUNK))
+        .enumerate()
+        .for_each(|(c, (refs, tris))| {
+            for (i, (r, t)) in refs.iter_mut().zip(tris).enumerate() {
+                let v = |k: usize| lanes([t[k], t[k + 1], t[k + 2]]);
+                let (lo, hi) = ref_bounds(v(0), v(3), v(6));
+                let id = i32x4::new([0, 0, 0, (c * CHUNK + i) as i32]);
+                *r = tri_ref(lo, hi, id, t[0].is_nan());
+            }
+        });
+    Ok(())
 }
 
 /// Keeps lanes 0..3.

@@ -56,6 +56,38 @@ pub fn node_section<'a>(dst: &'a mut [u8], plan: &Plan) -> Result<&'a mut [Node]
     })
 }
 
+/// The primitive records (`prim_size` bytes each) and ids of `stored` primitives and the node
+/// section of `dst` (the whole structure range), for a builder that writes all three.
+pub fn sections<'a>(
+    dst: &'a mut [u8],
+    plan: &Plan,
+    prim_size: usize,
+    stored: usize,
+) -> Result<(&'a mut [u8], &'a mut [u32], &'a mut [Node])> {
+    fits(dst, plan)?;
+    let short = || Error::OutOfHostMemory("structure smaller than its plan".into());
+    let (head, nodes) = dst.split_at_mut(plan.nodes_offset as usize);
+    let (head, ids) = head.split_at_mut(plan.prim_ids_offset as usize);
+    let prims = head
+        .get_mut(plan.prims_offset as usize..)
+        .and_then(|p| p.get_mut(..prim_size * stored))
+        .ok_or_else(short)?;
+    let cast = |e: bytemuck::PodCastError| {
+        Error::NotSupported(format!(
+            "acceleration structure memory is not 64-byte aligned ({e})"
+        ))
+    };
+    let ids =
+        bytemuck::try_cast_slice_mut(ids.get_mut(..4 * stored).ok_or_else(short)?).map_err(cast)?;
+    let nodes = bytemuck::try_cast_slice_mut(
+        nodes
+            .get_mut(..(super::NODE_SIZE * plan.node_capacity) as usize)
+            .ok_or_else(short)?,
+    )
+    .map_err(cast)?;
+    Ok((prims, ids, nodes))
+}
+
 /// Writes header and geometries into `dst` (the whole structure range), whose node section
 /// holds `tree`'s nodes. Returns the header written.
 pub fn encode(
