@@ -1,8 +1,9 @@
 //! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
-//! child with the largest surface area. Primitive references are partitioned in place (large
-//! ranges stably, through a second array), so the final order is the order of `refs` on
-//! return. Small ranges are split with an exact SAH sweep over sorted centroids instead of
-//! bins; their centroids are sorted once, and each sweep split hands its sides their orders.
+//! child with the largest surface area. Primitive references are partitioned in place; large
+//! ranges stably into the second array, whose next partition of each side moves it back, so
+//! the final order is the order of `refs` on return. Small ranges are split with an exact SAH
+//! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
+//! sweep split hands its sides their orders.
 
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -503,33 +504,69 @@ impl SideBounds {
     }
 }
 
-/// Partitions a large range on all threads: count each chunk's left side, then scatter every
-/// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
-/// sequential stable partition, whatever the thread count. Returns the size of the left side
-/// and the centroid bounds of both sides.
+/// Ranges of more than this many primitives are partitioned stably, through the other array.
+const LARGE: usize = PARALLEL_THRESHOLD * 16;
+
+/// Where a range's references are: in `refs`, their final place, or in `aux`, where a stable
+/// partition of a large range leaves both sides (copying them back would be one more pass over
+/// the range; the next partition of each side moves it back instead).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum At {
+    Refs,
+    Aux,
+}
+
+impl At {
+    /// The references of a range at `self`, given the range's piece of both arrays.
+    #[inline(always)]
+    fn data<'r>(self, refs: &'r [PrimRef], aux: &'r [PrimRef]) -> &'r [PrimRef] {
+        match self {
+            At::Refs => refs,
+            At::Aux => aux,
+        }
+    }
+    /// Moves a range's references to `refs` if they are in `aux`.
+    #[inline(always)]
+    fn settle(self, refs: &mut [PrimRef], aux: &[PrimRef]) {
+        // Rare: only where a stable partition made a small side.
+        #[cold]
+        #[inline(never)]
+        fn copy_back(refs: &mut [PrimRef], aux: &[PrimRef]) {
+            refs.copy_from_slice(aux);
+        }
+        if self == At::Aux {
+            copy_back(refs, aux);
+        }
+    }
+}
+
+/// Partitions a large range on all threads from `src` into `dst`: count each chunk's left
+/// side, then scatter every chunk into `dst` at its prefix-sum positions. The result is the
+/// same as a sequential stable partition, whatever the thread count. Returns the size of the
+/// left side and the centroid bounds of both sides.
 fn parallel_partition<const A: usize>(
-    refs: &mut [PrimRef],
-    aux: &mut [PrimRef],
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
     plane: Plane<A>,
 ) -> (usize, Box4, Box4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
-    let lefts: Vec<usize> = refs
+    let lefts: Vec<usize> = src
         .par_chunks(CHUNK)
         .map(|c| c.iter().filter(|r| plane.left_of(r)).count())
         .collect();
     let total_left: usize = lefts.iter().sum();
-    // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
-    let (mut left_part, mut right_part) = aux.split_at_mut(total_left);
+    // Each chunk writes its own disjoint pieces of `dst`: carve them in order.
+    let (mut left_part, mut right_part) = dst.split_at_mut(total_left);
     let mut pieces = Vec::with_capacity(lefts.len());
     for (i, n) in lefts.iter().enumerate() {
-        let len = CHUNK.min(refs.len() - i * CHUNK);
+        let len = CHUNK.min(src.len() - i * CHUNK);
         let (lp, lrest) = left_part.split_at_mut(*n);
         let (rp, rrest) = right_part.split_at_mut(len - n);
         pieces.push((lp, rp));
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<SideBounds> = refs
+    let infos: Vec<SideBounds> = src
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
@@ -549,9 +586,6 @@ fn parallel_partition<const A: usize>(
             sides
         })
         .collect();
-    refs.par_chunks_mut(CHUNK)
-        .zip(aux.par_chunks(CHUNK))
-        .for_each(|(d, s)| d.copy_from_slice(s));
     let mut all = SideBounds::EMPTY;
     for s in &infos {
         all.left.grow(&s.left);
@@ -561,24 +595,24 @@ fn parallel_partition<const A: usize>(
     (total_left, l, r)
 }
 
-/// Stable partition through `aux` in one pass, given the size of the left side; `None` (with
-/// `refs` untouched) if `left` turns out not to be it.
+/// Stable partition from `src` into `dst` in one pass, given the size of the left side; `None`
+/// if `left` turns out not to be it.
 fn stable_partition<const A: usize>(
-    refs: &mut [PrimRef],
-    aux: &mut [PrimRef],
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
     left: usize,
     plane: Plane<A>,
 ) -> Option<(usize, Box4, Box4)> {
-    let aux = &mut aux[..refs.len()];
+    let dst = &mut dst[..src.len()];
     let mut sides = SideBounds::EMPTY;
     let (mut li, mut ri) = (0, left);
-    for r in refs.iter() {
+    for r in src {
         let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
         // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
         let right_lane = mask_lane(right) as isize as usize;
         let at = if right_lane == 0 { li } else { ri };
-        if let Some(d) = aux.get_mut(at) {
+        if let Some(d) = dst.get_mut(at) {
             *d = bytemuck::cast(v);
         }
         li = li.wrapping_add(1).wrapping_add(right_lane);
@@ -587,20 +621,27 @@ fn stable_partition<const A: usize>(
     if li != left {
         return None;
     }
-    refs.copy_from_slice(aux);
     let (l, r) = sides.boxes();
     Some((left, l, r))
 }
 
-/// Partitions `refs` in place into those left of `plane` first; returns the size of the left
-/// side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
-/// swap, bounds grown with masks): which side a primitive goes to is often a coin toss, and
-/// mispredicted branches cost more than the extra stores.
-fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, Box4, Box4) {
+/// Partitions a range into `refs` with those left of `plane` first, reading it from `aux`
+/// when `FROM_AUX` (else in place); returns the size of the left side and the centroid
+/// bounds of both sides. Branch-free (Lomuto with an unconditional swap, bounds grown with
+/// masks): which side a primitive goes to is often a coin toss, and mispredicted branches
+/// cost more than the extra stores. From `aux` it is the same permutation: position `j` of
+/// `refs` is only read after the swap has written it.
+fn partition<const A: usize, const FROM_AUX: bool>(
+    refs: &mut [PrimRef],
+    aux: &[PrimRef],
+    plane: Plane<A>,
+) -> (usize, Box4, Box4) {
+    let aux = &aux[..refs.len()];
     let mut sides = SideBounds::EMPTY;
     let mut i = 0u32;
     for j in 0..refs.len() {
-        let (v, c2, right) = plane.classify(&refs[j]);
+        let r = if FROM_AUX { &aux[j] } else { &refs[j] };
+        let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
         refs[j] = refs[i as usize];
@@ -612,28 +653,37 @@ fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, B
     (i as usize, l, r)
 }
 
-/// Partitions a range by `plane` (through `aux` when large, stably), given the counts of the
-/// bins left of it. Returns the size of the left side and the centroid bounds of
-/// both sides.
+/// Partitions a range at `at` by `plane`, given the counts of the bins left of it: large
+/// ones stably into the other array, the others into `refs` (in place when there). Returns
+/// the size of the left side, the centroid bounds of both sides and where the sides are.
 fn partition_by<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     plane: Plane<A>,
     left_counts: &[Count],
-) -> (usize, Box4, Box4) {
-    if refs.len() > PARALLEL_THRESHOLD * 16 {
+) -> (usize, Box4, Box4, At) {
+    if refs.len() > LARGE {
+        let (src, dst, to) = match at {
+            At::Refs => (&*refs, aux, At::Aux),
+            At::Aux => (&*aux, refs, At::Refs),
+        };
         // On one thread the bins' counts give the left side's size, so no counting pass.
         // (Every stable partition is the same: the bytes do not depend on the path.)
         let single = if rayon::current_num_threads() == 1 {
             let counted: u32 = left_counts.iter().map(|c| c.0).sum();
-            stable_partition(refs, aux, counted as usize, plane)
+            stable_partition(src, dst, counted as usize, plane)
         } else {
             None
         };
-        single.unwrap_or_else(|| parallel_partition(refs, aux, plane))
-    } else {
-        partition(refs, plane)
+        let (mid, l, r) = single.unwrap_or_else(|| parallel_partition(src, dst, plane));
+        return (mid, l, r, to);
     }
+    let (mid, l, r) = match at {
+        At::Refs => partition::<A, false>(refs, aux, plane),
+        At::Aux => partition::<A, true>(refs, aux, plane),
+    };
+    (mid, l, r, At::Refs)
 }
 
 // Not inlined into `split`: see `sweep`.
@@ -641,12 +691,15 @@ fn partition_by<const A: usize>(
 fn binned_split_n<const N: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     info: &RangeInfo,
     binner: &Binner,
-) -> Option<Split> {
+) -> (Option<Split>, At) {
     let mut bins = Bins::<N>::new();
-    bin_range(&mut bins, refs, binner);
-    let (axis, bin, cost) = bins.best(binner)?;
+    bin_range(&mut bins, at.data(refs, aux), binner);
+    let Some((axis, bin, cost)) = bins.best(binner) else {
+        return (None, at);
+    };
     // Left of the plane: `!(c >= t)` on the axis.
     let t = binner.threshold(
         axis,
@@ -655,16 +708,16 @@ fn binned_split_n<const N: usize>(
         info.centroids.hi[axis],
     );
     let left_counts = &bins.counts[axis][..bin];
-    let (mid, cl, cr) = match axis {
-        0 => partition_by(refs, aux, Plane::<0>::new(t), left_counts),
-        1 => partition_by(refs, aux, Plane::<1>::new(t), left_counts),
-        _ => partition_by(refs, aux, Plane::<2>::new(t), left_counts),
+    let (mid, cl, cr, at) = match axis {
+        0 => partition_by(refs, aux, at, Plane::<0>::new(t), left_counts),
+        1 => partition_by(refs, aux, at, Plane::<1>::new(t), left_counts),
+        _ => partition_by(refs, aux, at, Plane::<2>::new(t), left_counts),
     };
     if mid == 0 || mid == refs.len() {
-        return None;
+        return (None, at);
     }
     let (lb, rb) = bins.sides(axis, bin);
-    Some(Split {
+    let split = Split {
         mid,
         left: RangeInfo {
             bounds: lb,
@@ -675,16 +728,19 @@ fn binned_split_n<const N: usize>(
             centroids: cr.aabb(),
         },
         cost,
-    })
+    };
+    (Some(split), at)
 }
 
-/// Binned split, partitioning `refs` in place (through `aux` when large).
+/// Binned split of a range at `at` (see [`partition_by`]); also says where the range is
+/// afterwards, split or not.
 fn binned_split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     info: &RangeInfo,
     ctx: &Ctx,
-) -> Option<Split> {
+) -> (Option<Split>, At) {
     // Small ranges gain nothing from many bins; they only pay for sweeping them.
     let bins = if refs.len() < 256 {
         ctx.bins.min(8)
@@ -699,12 +755,12 @@ fn binned_split(
     };
     let binner = Binner::new(&info.centroids, bins);
     if binner.scales == [0.0; 4] {
-        return None;
+        return (None, at);
     }
     match bins {
-        8 => binned_split_n::<8>(refs, aux, info, &binner),
-        16 => binned_split_n::<16>(refs, aux, info, &binner),
-        _ => binned_split_n::<32>(refs, aux, info, &binner),
+        8 => binned_split_n::<8>(refs, aux, at, info, &binner),
+        16 => binned_split_n::<16>(refs, aux, at, info, &binner),
+        _ => binned_split_n::<32>(refs, aux, at, info, &binner),
     }
 }
 
@@ -899,23 +955,27 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     }
 }
 
-/// Splits a range with at least two primitives; `orders` are the range's orders when a
-/// sweep split made it. Small ranges come back with the orders of both sides.
+/// Splits a range at `at` with at least two primitives; `orders` are the range's orders when
+/// a sweep split made it. Small ranges come back with the orders of both sides. Also says
+/// where both sides are.
 // Inlined into `build_child`: the split and orders it returns then reach the parts without
 // going through a return slot.
 #[inline(always)]
 fn split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     info: &RangeInfo,
     orders: Option<&Orders>,
     ctx: &Ctx,
     depth: u32,
-) -> (Split, Option<Orders>, Option<Orders>) {
+) -> (Split, Option<Orders>, Option<Orders>, At) {
     if depth >= MEDIAN_DEPTH {
-        return (median_split(refs, info), None, None);
+        at.settle(refs, aux);
+        return (median_split(refs, info), None, None, At::Refs);
     }
     if refs.len() == 2 {
+        at.settle(refs, aux);
         // One way to split two: no orders to sort or sweep.
         let (l, r) = (Box8::of(&refs[0]), Box8::of(&refs[1]));
         let (l, r) = (RangeInfo::bounded(&l), RangeInfo::bounded(&r));
@@ -927,17 +987,24 @@ fn split(
             right: r,
             cost,
         };
-        return (s, Some(one), Some(one));
+        return (s, Some(one), Some(one), At::Refs);
     }
     if refs.len() <= SMALL {
+        at.settle(refs, aux);
         let (s, l, r) = match orders {
             Some(o) => sweep_split(refs, o),
             None => sweep_split(refs, &Orders::of(refs)),
         };
-        return (s, Some(l), Some(r));
+        return (s, Some(l), Some(r), At::Refs);
     }
-    let s = binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info));
-    (s, None, None)
+    let (s, at) = binned_split(refs, aux, at, info, ctx);
+    match s {
+        Some(s) => (s, None, None, at),
+        None => {
+            at.settle(refs, aux);
+            (median_split(refs, info), None, None, At::Refs)
+        }
+    }
 }
 
 pub fn build(
@@ -958,7 +1025,8 @@ pub fn build(
     };
     let info = RangeInfo::of(refs);
     let mut out = NodeList::new(nodes);
-    let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
+    let aux = &mut aux[..refs.len()];
+    let root = build_child(refs, aux, At::Refs, 0, info, &ctx, 0, &mut out);
     out.tree(Some(root))
 }
 
@@ -974,9 +1042,33 @@ fn leaf(info: &RangeInfo, base: u32, n: usize) -> (Aabb, Child) {
     )
 }
 
+/// Builds the subtree over a range at `at`, leaving its references in final order in `refs`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn build_child(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
+    base: u32,
+    info: RangeInfo,
+    ctx: &Ctx,
+    depth: u32,
+    out: &mut NodeList,
+) -> (Aabb, Child) {
+    if refs.len() > LARGE {
+        build_node::<true>(refs, aux, at, base, info, ctx, depth, out)
+    } else {
+        build_node::<false>(refs, aux, at, base, info, ctx, depth, out)
+    }
+}
+
+/// [`build_child`] for a range of more than [`LARGE`] primitives when `LARGE`: only then can
+/// its parts be in `aux` (a part of a smaller range is in `refs` once the range is split).
+#[allow(clippy::too_many_arguments)]
+fn build_node<const LARGE: bool>(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    at: At,
     base: u32,
     info: RangeInfo,
     ctx: &Ctx,
@@ -987,11 +1079,12 @@ fn build_child(
     let as_leaf = leaf(&info, base, n);
     // Fewer primitives than a node has slots: always a leaf (so every inner node is full).
     if n < WIDTH {
+        at.settle(refs, aux);
         return as_leaf;
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
-    let (first, first_l, first_r) = split(refs, aux, &info, None, ctx, depth);
+    let (first, first_l, first_r, first_at) = split(refs, aux, at, &info, None, ctx, depth);
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
         if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
@@ -1002,8 +1095,11 @@ fn build_child(
     let mut ranges = [(0usize, 0usize); WIDTH];
     let mut infos = [RangeInfo::EMPTY; WIDTH];
     let mut orders: [Option<Orders>; WIDTH] = [None; WIDTH];
+    let mut ats = [At::Refs; WIDTH];
+    let at_of = |ats: &[At; WIDTH], j: usize| if LARGE { ats[j] } else { At::Refs };
     (ranges[0], infos[0], orders[0]) = ((0, first.mid), first.left, first_l);
     (ranges[1], infos[1], orders[1]) = ((first.mid, n), first.right, first_r);
+    (ats[0], ats[1]) = (first_at, first_at);
     // Each part's area when it has at least two primitives (else -1, never picked).
     let area = |(begin, end): (usize, usize), info: &RangeInfo| {
         if end - begin >= 2 {
@@ -1032,9 +1128,10 @@ fn build_child(
         }
         let Some(i) = pick else { break };
         let (begin, end) = ranges[i];
-        let (s, lo, ro) = split(
+        let (s, lo, ro, s_at) = split(
             &mut refs[begin..end],
             &mut aux[begin..end],
+            at_of(&ats, i),
             &infos[i],
             orders[i].as_ref(),
             ctx,
@@ -1043,6 +1140,7 @@ fn build_child(
         let mid = begin + s.mid;
         (ranges[i], infos[i], orders[i]) = ((begin, mid), s.left, lo);
         (ranges[count], infos[count], orders[count]) = ((mid, end), s.right, ro);
+        (ats[i], ats[count]) = (s_at, s_at);
         areas[i] = area(ranges[i], &infos[i]);
         areas[count] = area(ranges[count], &infos[count]);
         next[count] = next[i];
@@ -1059,7 +1157,7 @@ fn build_child(
             j
         });
         // Hand each part its own disjoint slice, then build them in parallel.
-        type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
+        type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], At, u32, RangeInfo)>;
         let mut slices: [Slot; WIDTH] = Default::default();
         let (mut rest, mut aux_rest) = (refs, aux);
         let mut at = 0;
@@ -1069,7 +1167,7 @@ fn build_child(
             let (mine, tail) = tail.split_at_mut(end - begin);
             let (_, atail) = aux_rest.split_at_mut(begin - at);
             let (amine, atail) = atail.split_at_mut(end - begin);
-            *slot = Some((mine, amine, base + begin as u32, infos[j]));
+            *slot = Some((mine, amine, at_of(&ats, j), base + begin as u32, infos[j]));
             rest = tail;
             aux_rest = atail;
             at = end;
@@ -1079,9 +1177,9 @@ fn build_child(
         let built: Vec<((Aabb, Child), NodeList)> = slices
             .into_par_iter()
             .flatten()
-            .map(|(s, a, b, i)| {
+            .map(|(s, a, at, b, i)| {
                 let mut sub = NodeList::with_capacity(node_hint(s.len()));
-                let c = build_child(s, a, b, i, ctx, depth + 1, &mut sub);
+                let c = build_child(s, a, at, b, i, ctx, depth + 1, &mut sub);
                 (c, sub)
             })
             .collect();
@@ -1096,10 +1194,13 @@ fn build_child(
             let first = base + begin as u32;
             // Most children are small leaves: made here, without a call.
             let (b, c) = if end - begin < WIDTH {
+                if LARGE {
+                    ats[j].settle(&mut refs[begin..end], &aux[begin..end]);
+                }
                 leaf(&infos[j], first, end - begin)
             } else {
                 let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
-                build_child(s, a, first, infos[j], ctx, depth + 1, out)
+                build_child(s, a, at_of(&ats, j), first, infos[j], ctx, depth + 1, out)
             };
             tree::set_child(&mut node, k, &b, c);
             j = next[j] as usize & (WIDTH - 1);
