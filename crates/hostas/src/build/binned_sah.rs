@@ -183,6 +183,49 @@ struct Split {
     cost: f32,
 }
 
+/// A part of a node's range: positions `begin..end` of the range, their info and, where a
+/// sweep split made it, their orders. Splits write both sides' parts in place.
+#[derive(Clone, Copy)]
+struct Part {
+    begin: usize,
+    end: usize,
+    info: RangeInfo,
+    orders: Option<Orders>,
+}
+
+impl Part {
+    const EMPTY: Part = Part {
+        begin: 0,
+        end: 0,
+        info: RangeInfo::EMPTY,
+        orders: None,
+    };
+    /// Makes `self` (the part split, now its left side) and `right` the sides of a split
+    /// `mid` primitives into it.
+    #[inline(always)]
+    fn split_into(
+        &mut self,
+        right: &mut Part,
+        mid: usize,
+        infos: (RangeInfo, RangeInfo),
+        orders: (Option<Orders>, Option<Orders>),
+    ) {
+        let (begin, end) = (self.begin, self.end);
+        *self = Part {
+            begin,
+            end: begin + mid,
+            info: infos.0,
+            orders: orders.0,
+        };
+        *right = Part {
+            begin: begin + mid,
+            end,
+            info: infos.1,
+            orders: orders.1,
+        };
+    }
+}
+
 /// Maps doubled centroids to bins, on all axes at once (`cvttps2dq` of the scaled offset).
 /// The mapping is monotone in the centroid on each axis, and binning and partitioning use the
 /// same arithmetic, so a partition always agrees with the bin counts. Centroids of the range
@@ -822,23 +865,29 @@ impl Orders {
     }
 }
 
-/// Exact SAH split of a small range (2 to [`SMALL`] primitives) given its orders: sweep
-/// every position on every axis, then permute the references once, for the winning axis.
-/// Returns the split and the orders of both sides. The sides' infos carry bounds only (see
-/// [`RangeInfo::centroids`]).
-fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+/// Exact SAH split of a small range (2 to [`SMALL`] primitives, the part `left`) given its
+/// orders: sweep every position on every axis, then permute the references once, for the
+/// winning axis. Makes `left` and `right` the sides, with their orders, and returns the SAH
+/// numerator of the split. The sides' infos carry bounds only (see [`RangeInfo::centroids`]).
+fn sweep_split(refs: &mut [PrimRef], orders: &Orders, left: &mut Part, right: &mut Part) -> f32 {
     // Most swept ranges have 8 or fewer primitives: half-size working arrays for them.
     if refs.len() <= 8 {
-        sweep::<8>(refs, orders)
+        sweep::<8>(refs, orders, left, right)
     } else {
-        sweep::<SMALL>(refs, orders)
+        sweep::<SMALL>(refs, orders, left, right)
     }
 }
 
 /// [`sweep_split`] for ranges of at most `L` primitives (`L` a power of two up to [`SMALL`]).
 // Not inlined: inside `split`, its frame and spills cost every split more than the call does.
+// The sides are written through `left` and `right`, straight into the node's parts.
 #[inline(never)]
-fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+fn sweep<const L: usize>(
+    refs: &mut [PrimRef],
+    orders: &Orders,
+    left: &mut Part,
+    right: &mut Part,
+) -> f32 {
     let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
     let mut boxes = [Box8::EMPTY; L];
@@ -867,8 +916,7 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
         }
         left_n += f32x4::ONE;
         right_n -= f32x4::ONE;
-        let right = right_area[i & (L - 1)];
-        let cost = half_areas3(&acc) * left_n + right * right_n;
+        let cost = half_areas3(&acc) * left_n + right_area[i & (L - 1)] * right_n;
         // Selects, not branches: which position wins is data, not pattern.
         let better = cost.simd_lt(best_cost);
         best_cost = better.select(cost, best_cost);
@@ -887,19 +935,19 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
     let identity: [u8; SMALL] = std::array::from_fn(|i| i as u8);
     let perm = orders.0.get(best_axis).unwrap_or(&identity);
     let mut pos = [0u8; L];
-    let (mut left, mut right) = (Box8::EMPTY, Box8::EMPTY);
+    let (mut lb, mut rb) = (Box8::EMPTY, Box8::EMPTY);
     for (i, (dst, &src)) in refs.iter_mut().zip(&perm[..n]).enumerate() {
         let b = &boxes[src as usize & (L - 1)];
         *dst = b.prim_ref();
         pos[src as usize & (L - 1)] = i as u8;
         // Both sides' bounds, grown in the new order (the same bits as from the references).
         if i < best_mid {
-            left.grow(b);
+            lb.grow(b);
         } else {
-            right.grow(b);
+            rb.grow(b);
         }
     }
-    let (left, right) = (RangeInfo::bounded(&left), RangeInfo::bounded(&right));
+    let infos = (RangeInfo::bounded(&lb), RangeInfo::bounded(&rb));
     // Each side's orders: the range's orders filtered, as positions after the permutation.
     // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
@@ -917,13 +965,9 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
             ri += (p >= mid) as usize;
         }
     }
-    let split = Split {
-        mid: best_mid,
-        left,
-        right,
-        cost: best_cost,
-    };
-    (split, Orders(lo), Orders(ro))
+    let orders = (Some(Orders(lo)), Some(Orders(ro)));
+    left.split_into(right, best_mid, infos, orders);
+    best_cost
 }
 
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
@@ -955,24 +999,28 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     }
 }
 
-/// Splits a range at `at` with at least two primitives; `orders` are the range's orders when
-/// a sweep split made it. Small ranges come back with the orders of both sides. Also says
-/// where both sides are.
-// Inlined into `build_child`: the split and orders it returns then reach the parts without
-// going through a return slot.
+/// Splits the part `left` (a range at `at` with at least two primitives, its orders there
+/// when a sweep split made it) into itself and `right`; small ranges' sides get their orders.
+/// Returns the split's SAH numerator and where both sides are.
+// Inlined into `build_node`: the sides then reach the parts without going through a return
+// slot.
 #[inline(always)]
 fn split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     at: At,
-    info: &RangeInfo,
-    orders: Option<&Orders>,
+    left: &mut Part,
+    right: &mut Part,
     ctx: &Ctx,
     depth: u32,
-) -> (Split, Option<Orders>, Option<Orders>, At) {
+) -> (f32, At) {
+    let whole = |s: Split, left: &mut Part, right: &mut Part| {
+        left.split_into(right, s.mid, (s.left, s.right), (None, None));
+        s.cost
+    };
     if depth >= MEDIAN_DEPTH {
         at.settle(refs, aux);
-        return (median_split(refs, info), None, None, At::Refs);
+        return (whole(median_split(refs, &left.info), left, right), At::Refs);
     }
     if refs.len() == 2 {
         at.settle(refs, aux);
@@ -980,29 +1028,24 @@ fn split(
         let (l, r) = (Box8::of(&refs[0]), Box8::of(&refs[1]));
         let (l, r) = (RangeInfo::bounded(&l), RangeInfo::bounded(&r));
         let cost = l.bounds.half_area() + r.bounds.half_area();
-        let one = Orders([[0; SMALL]; 3]);
-        let s = Split {
-            mid: 1,
-            left: l,
-            right: r,
-            cost,
-        };
-        return (s, Some(one), Some(one), At::Refs);
+        let one = Some(Orders([[0; SMALL]; 3]));
+        left.split_into(right, 1, (l, r), (one, one));
+        return (cost, At::Refs);
     }
     if refs.len() <= SMALL {
         at.settle(refs, aux);
-        let (s, l, r) = match orders {
-            Some(o) => sweep_split(refs, o),
-            None => sweep_split(refs, &Orders::of(refs)),
+        let orders = match &left.orders {
+            Some(o) => *o,
+            None => Orders::of(refs),
         };
-        return (s, Some(l), Some(r), At::Refs);
+        return (sweep_split(refs, &orders, left, right), At::Refs);
     }
-    let (s, at) = binned_split(refs, aux, at, info, ctx);
+    let (s, at) = binned_split(refs, aux, at, &left.info, ctx);
     match s {
-        Some(s) => (s, None, None, at),
+        Some(s) => (whole(s, left, right), at),
         None => {
             at.settle(refs, aux);
-            (median_split(refs, info), None, None, At::Refs)
+            (whole(median_split(refs, &left.info), left, right), At::Refs)
         }
     }
 }
@@ -1084,33 +1127,37 @@ fn build_node<const LARGE: bool>(
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
-    let (first, first_l, first_r, first_at) = split(refs, aux, at, &info, None, ctx, depth);
+    let mut parts = [Part::EMPTY; WIDTH];
+    parts[0] = Part {
+        begin: 0,
+        end: n,
+        info,
+        orders: None,
+    };
+    let (first_cost, first_at) = {
+        let (l, r) = parts.split_at_mut(1);
+        split(refs, aux, at, &mut l[0], &mut r[0], ctx, depth)
+    };
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
-        if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
+        if !(ctx.traversal_cost * area + first_cost < area * n as f32) {
             return as_leaf;
         }
     }
-    // The parts, field by field: a part's orders are large, and are moved only where used.
-    let mut ranges = [(0usize, 0usize); WIDTH];
-    let mut infos = [RangeInfo::EMPTY; WIDTH];
-    let mut orders: [Option<Orders>; WIDTH] = [None; WIDTH];
     let mut ats = [At::Refs; WIDTH];
     let at_of = |ats: &[At; WIDTH], j: usize| if LARGE { ats[j] } else { At::Refs };
-    (ranges[0], infos[0], orders[0]) = ((0, first.mid), first.left, first_l);
-    (ranges[1], infos[1], orders[1]) = ((first.mid, n), first.right, first_r);
     (ats[0], ats[1]) = (first_at, first_at);
     // Each part's area when it has at least two primitives (else -1, never picked).
-    let area = |(begin, end): (usize, usize), info: &RangeInfo| {
-        if end - begin >= 2 {
-            info.bounds.half_area()
+    let area = |p: &Part| {
+        if p.end - p.begin >= 2 {
+            p.info.bounds.half_area()
         } else {
             -1.0
         }
     };
     let mut areas = [-1.0f32; WIDTH];
-    areas[0] = area(ranges[0], &infos[0]);
-    areas[1] = area(ranges[1], &infos[1]);
+    areas[0] = area(&parts[0]);
+    areas[1] = area(&parts[1]);
     // Slot order as a list: part 0 starts the range, and a split part's right side follows
     // it (no sort of the parts afterwards).
     let mut next = [0u8; WIDTH];
@@ -1127,22 +1174,21 @@ fn build_node<const LARGE: bool>(
             }
         }
         let Some(i) = pick else { break };
-        let (begin, end) = ranges[i];
-        let (s, lo, ro, s_at) = split(
+        let (head, tail) = parts.split_at_mut(count);
+        let (left, right) = (&mut head[i], &mut tail[0]);
+        let (begin, end) = (left.begin, left.end);
+        let (_, s_at) = split(
             &mut refs[begin..end],
             &mut aux[begin..end],
             at_of(&ats, i),
-            &infos[i],
-            orders[i].as_ref(),
+            left,
+            right,
             ctx,
             depth,
         );
-        let mid = begin + s.mid;
-        (ranges[i], infos[i], orders[i]) = ((begin, mid), s.left, lo);
-        (ranges[count], infos[count], orders[count]) = ((mid, end), s.right, ro);
         (ats[i], ats[count]) = (s_at, s_at);
-        areas[i] = area(ranges[i], &infos[i]);
-        areas[count] = area(ranges[count], &infos[count]);
+        areas[i] = area(left);
+        areas[count] = area(right);
         next[count] = next[i];
         next[i] = count as u8;
         count += 1;
@@ -1162,12 +1208,14 @@ fn build_node<const LARGE: bool>(
         let (mut rest, mut aux_rest) = (refs, aux);
         let mut at = 0;
         for (slot, &j) in slices.iter_mut().zip(&in_order[..count]) {
-            let (begin, end) = ranges[j];
+            let Part {
+                begin, end, info, ..
+            } = parts[j];
             let (_, tail) = rest.split_at_mut(begin - at);
             let (mine, tail) = tail.split_at_mut(end - begin);
             let (_, atail) = aux_rest.split_at_mut(begin - at);
             let (amine, atail) = atail.split_at_mut(end - begin);
-            *slot = Some((mine, amine, at_of(&ats, j), base + begin as u32, infos[j]));
+            *slot = Some((mine, amine, at_of(&ats, j), base + begin as u32, info));
             rest = tail;
             aux_rest = atail;
             at = end;
@@ -1190,17 +1238,18 @@ fn build_node<const LARGE: bool>(
         // The parts in slot order, each on its own piece of the range.
         let mut j = 0;
         for k in 0..count {
-            let (begin, end) = ranges[j];
+            let (begin, end) = (parts[j].begin, parts[j].end);
             let first = base + begin as u32;
             // Most children are small leaves: made here, without a call.
             let (b, c) = if end - begin < WIDTH {
                 if LARGE {
                     ats[j].settle(&mut refs[begin..end], &aux[begin..end]);
                 }
-                leaf(&infos[j], first, end - begin)
+                leaf(&parts[j].info, first, end - begin)
             } else {
                 let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
-                build_child(s, a, at_of(&ats, j), first, infos[j], ctx, depth + 1, out)
+                let info = parts[j].info;
+                build_child(s, a, at_of(&ats, j), first, info, ctx, depth + 1, out)
             };
             tree::set_child(&mut node, k, &b, c);
             j = next[j] as usize & (WIDTH - 1);
@@ -1341,9 +1390,13 @@ mod tests {
                     }
                 }));
                 let orders = Orders::of(&refs);
-                let (s, lo, ro) = sweep_split(&mut refs, &orders);
-                assert!(s.mid > 0 && s.mid < n);
-                for (side, o) in [(&refs[..s.mid], lo), (&refs[s.mid..], ro)] {
+                let (mut left, mut right) = (Part::EMPTY, Part::EMPTY);
+                left.end = n;
+                sweep_split(&mut refs, &orders, &mut left, &mut right);
+                let mid = left.end;
+                assert!(mid > 0 && mid < n && (right.begin, right.end) == (mid, n));
+                for (side, part) in [(&refs[..mid], left), (&refs[mid..], right)] {
+                    let o = part.orders.expect("a swept side has orders");
                     let fresh = Orders::of(side);
                     for k in 0..3 {
                         assert_eq!(o.0[k][..side.len()], fresh.0[k][..side.len()]);
