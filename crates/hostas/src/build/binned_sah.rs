@@ -513,10 +513,11 @@ impl<const A: usize> Plane<A> {
     }
 }
 
-/// The first lane of a mask as an integer: -1 when set, 0 when not.
+/// The first lane of a mask as an offset: all bits (-1) when set, 0 when not. (Lanes 0 and 1
+/// read as one 64-bit integer: the same value, with no sign extension.)
 #[inline(always)]
-fn mask_lane(m: f32x8) -> i32 {
-    bytemuck::cast::<_, [i32; 8]>(m)[0]
+fn mask_lane(m: f32x8) -> usize {
+    bytemuck::cast::<_, [u64; 4]>(m)[0] as usize
 }
 
 /// The centroid bounds of both sides of a plane as boxes `(lo, -hi)` ([`Box8`]), grown in
@@ -653,7 +654,7 @@ fn stable_partition<const A: usize>(
         let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
         // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
-        let right_lane = mask_lane(right) as isize as usize;
+        let right_lane = mask_lane(right);
         let at = if right_lane == 0 { li } else { ri };
         if let Some(d) = dst.get_mut(at) {
             *d = bytemuck::cast(v);
@@ -681,19 +682,19 @@ fn partition<const A: usize, const FROM_AUX: bool>(
 ) -> (usize, Box4, Box4) {
     let aux = &aux[..refs.len()];
     let mut sides = SideBounds::EMPTY;
-    let mut i = 0u32;
+    let mut i = 0usize;
     for j in 0..refs.len() {
         let r = if FROM_AUX { &aux[j] } else { &refs[j] };
         let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
-        refs[j] = refs[i as usize];
-        refs[i as usize] = bytemuck::cast(v);
+        refs[j] = refs[i];
+        refs[i] = bytemuck::cast(v);
         // `i` advances past a left reference only.
-        i = i.wrapping_add(1).wrapping_add(mask_lane(right) as u32);
+        i = i.wrapping_add(1).wrapping_add(mask_lane(right));
     }
     let (l, r) = sides.boxes();
-    (i as usize, l, r)
+    (i, l, r)
 }
 
 /// Partitions a range at `at` by `plane`, given the counts of the bins left of it: large
