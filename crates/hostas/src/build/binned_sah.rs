@@ -1149,9 +1149,15 @@ fn build_node<const LARGE: bool>(
     let at_of = |ats: &[At; WIDTH], j: usize| if LARGE { ats[j] } else { At::Refs };
     (ats[0], ats[1]) = (first_at, first_at);
     // Each part's area when it has at least two primitives (else -1, never picked).
+    // (`Aabb::half_area`, 0 for an empty box or one with a NaN, without its branches.)
     let area = |p: &Part| {
+        let b = &p.info.bounds;
+        let d = [b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]];
+        let half_area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+        let full = (b.lo[0] <= b.hi[0]) & (b.lo[1] <= b.hi[1]) & (b.lo[2] <= b.hi[2]);
+        let half_area = if full { half_area } else { 0.0 };
         if p.end - p.begin >= 2 {
-            p.info.bounds.half_area()
+            half_area
         } else {
             -1.0
         }
@@ -1165,16 +1171,19 @@ fn build_node<const LARGE: bool>(
     next[0] = 1;
     let mut count = 2;
     while count < WIDTH {
-        // Split the part with the largest area that has at least two primitives.
-        let mut pick = None;
-        let mut best_area = -1.0f32;
-        for (i, &a) in areas[..count].iter().enumerate() {
-            if a > best_area {
-                best_area = a;
-                pick = Some(i);
-            }
+        // Split the (first) part with the largest area that has at least two primitives.
+        // Over all slots with selects, not branches (slots not made yet have -1): which part
+        // wins is data, not pattern.
+        let (mut pick, mut best_area) = (WIDTH, -1.0f32);
+        for (i, &a) in areas.iter().enumerate() {
+            let better = a > best_area;
+            best_area = if better { a } else { best_area };
+            pick = if better { i } else { pick };
         }
-        let Some(i) = pick else { break };
+        if pick == WIDTH {
+            break;
+        }
+        let i = pick;
         let (head, tail) = parts.split_at_mut(count);
         let (left, right) = (&mut head[i], &mut tail[0]);
         let (begin, end) = (left.begin, left.end);
