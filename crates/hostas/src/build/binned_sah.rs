@@ -1250,18 +1250,20 @@ fn build_node<const LARGE: bool>(
         for k in 0..count {
             let (begin, end) = (parts[j].begin, parts[j].end);
             let first = base + begin as u32;
-            // Most children are small leaves: made here, without a call.
-            let (b, c) = if end - begin < WIDTH {
+            // Most children are small leaves: made here, without a call, their box set
+            // straight from the part.
+            if end - begin < WIDTH {
                 if LARGE {
                     ats[j].settle(&mut refs[begin..end], &aux[begin..end]);
                 }
-                leaf(&parts[j].info, first, end - begin)
+                let (b, c) = leaf(&parts[j].info, first, end - begin);
+                tree::set_child(&mut node, k, &b, c);
             } else {
                 let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
                 let info = parts[j].info;
-                build_child(s, a, at_of(&ats, j), first, info, ctx, depth + 1, out)
-            };
-            tree::set_child(&mut node, k, &b, c);
+                let (b, c) = build_child(s, a, at_of(&ats, j), first, info, ctx, depth + 1, out);
+                tree::set_child(&mut node, k, &b, c);
+            }
             j = next[j] as usize & (WIDTH - 1);
         }
     }
