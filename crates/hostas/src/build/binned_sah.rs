@@ -1,8 +1,9 @@
 //! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
-//! child with the largest surface area. Primitive references are partitioned in place (large
-//! ranges stably, through a second array), so the final order is the order of `refs` on
-//! return. Small ranges are split with an exact SAH sweep over sorted centroids instead of
-//! bins; their centroids are sorted once, and each sweep split hands its sides their orders.
+//! child with the largest surface area. Primitive references are partitioned in place; large
+//! ranges stably into the second array, whose next partition of each side moves it back, so
+//! the final order is the order of `refs` on return. Small ranges are split with an exact SAH
+//! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
+//! sweep split hands its sides their orders.
 
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -180,6 +181,49 @@ struct Split {
     left: RangeInfo,
     right: RangeInfo,
     cost: f32,
+}
+
+/// A part of a node's range: positions `begin..end` of the range, their info and, where a
+/// sweep split made it, their orders. Splits write both sides' parts in place.
+#[derive(Clone, Copy)]
+struct Part {
+    begin: usize,
+    end: usize,
+    info: RangeInfo,
+    orders: Option<Orders>,
+}
+
+impl Part {
+    const EMPTY: Part = Part {
+        begin: 0,
+        end: 0,
+        info: RangeInfo::EMPTY,
+        orders: None,
+    };
+    /// Makes `self` (the part split, now its left side) and `right` the sides of a split
+    /// `mid` primitives into it.
+    #[inline(always)]
+    fn split_into(
+        &mut self,
+        right: &mut Part,
+        mid: usize,
+        infos: (RangeInfo, RangeInfo),
+        orders: (Option<Orders>, Option<Orders>),
+    ) {
+        let (begin, end) = (self.begin, self.end);
+        *self = Part {
+            begin,
+            end: begin + mid,
+            info: infos.0,
+            orders: orders.0,
+        };
+        *right = Part {
+            begin: begin + mid,
+            end,
+            info: infos.1,
+            orders: orders.1,
+        };
+    }
 }
 
 /// Maps doubled centroids to bins, on all axes at once (`cvttps2dq` of the scaled offset).
@@ -469,10 +513,11 @@ impl<const A: usize> Plane<A> {
     }
 }
 
-/// The first lane of a mask as an integer: -1 when set, 0 when not.
+/// The first lane of a mask as an offset: all bits (-1) when set, 0 when not. (Lanes 0 and 1
+/// read as one 64-bit integer: the same value, with no sign extension.)
 #[inline(always)]
-fn mask_lane(m: f32x8) -> i32 {
-    bytemuck::cast::<_, [i32; 8]>(m)[0]
+fn mask_lane(m: f32x8) -> usize {
+    bytemuck::cast::<_, [u64; 4]>(m)[0] as usize
 }
 
 /// The centroid bounds of both sides of a plane as boxes `(lo, -hi)` ([`Box8`]), grown in
@@ -503,33 +548,69 @@ impl SideBounds {
     }
 }
 
-/// Partitions a large range on all threads: count each chunk's left side, then scatter every
-/// chunk into `aux` at its prefix-sum positions and copy back. The result is the same as a
-/// sequential stable partition, whatever the thread count. Returns the size of the left side
-/// and the centroid bounds of both sides.
+/// Ranges of more than this many primitives are partitioned stably, through the other array.
+const LARGE: usize = PARALLEL_THRESHOLD * 16;
+
+/// Where a range's references are: in `refs`, their final place, or in `aux`, where a stable
+/// partition of a large range leaves both sides (copying them back would be one more pass over
+/// the range; the next partition of each side moves it back instead).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum At {
+    Refs,
+    Aux,
+}
+
+impl At {
+    /// The references of a range at `self`, given the range's piece of both arrays.
+    #[inline(always)]
+    fn data<'r>(self, refs: &'r [PrimRef], aux: &'r [PrimRef]) -> &'r [PrimRef] {
+        match self {
+            At::Refs => refs,
+            At::Aux => aux,
+        }
+    }
+    /// Moves a range's references to `refs` if they are in `aux`.
+    #[inline(always)]
+    fn settle(self, refs: &mut [PrimRef], aux: &[PrimRef]) {
+        // Rare: only where a stable partition made a small side.
+        #[cold]
+        #[inline(never)]
+        fn copy_back(refs: &mut [PrimRef], aux: &[PrimRef]) {
+            refs.copy_from_slice(aux);
+        }
+        if self == At::Aux {
+            copy_back(refs, aux);
+        }
+    }
+}
+
+/// Partitions a large range on all threads from `src` into `dst`: count each chunk's left
+/// side, then scatter every chunk into `dst` at its prefix-sum positions. The result is the
+/// same as a sequential stable partition, whatever the thread count. Returns the size of the
+/// left side and the centroid bounds of both sides.
 fn parallel_partition<const A: usize>(
-    refs: &mut [PrimRef],
-    aux: &mut [PrimRef],
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
     plane: Plane<A>,
 ) -> (usize, Box4, Box4) {
     const CHUNK: usize = PARALLEL_THRESHOLD * 4;
-    let lefts: Vec<usize> = refs
+    let lefts: Vec<usize> = src
         .par_chunks(CHUNK)
         .map(|c| c.iter().filter(|r| plane.left_of(r)).count())
         .collect();
     let total_left: usize = lefts.iter().sum();
-    // Each chunk writes its own disjoint pieces of `aux`: carve them in order.
-    let (mut left_part, mut right_part) = aux.split_at_mut(total_left);
+    // Each chunk writes its own disjoint pieces of `dst`: carve them in order.
+    let (mut left_part, mut right_part) = dst.split_at_mut(total_left);
     let mut pieces = Vec::with_capacity(lefts.len());
     for (i, n) in lefts.iter().enumerate() {
-        let len = CHUNK.min(refs.len() - i * CHUNK);
+        let len = CHUNK.min(src.len() - i * CHUNK);
         let (lp, lrest) = left_part.split_at_mut(*n);
         let (rp, rrest) = right_part.split_at_mut(len - n);
         pieces.push((lp, rp));
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<SideBounds> = refs
+    let infos: Vec<SideBounds> = src
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
@@ -549,9 +630,6 @@ fn parallel_partition<const A: usize>(
             sides
         })
         .collect();
-    refs.par_chunks_mut(CHUNK)
-        .zip(aux.par_chunks(CHUNK))
-        .for_each(|(d, s)| d.copy_from_slice(s));
     let mut all = SideBounds::EMPTY;
     for s in &infos {
         all.left.grow(&s.left);
@@ -561,24 +639,24 @@ fn parallel_partition<const A: usize>(
     (total_left, l, r)
 }
 
-/// Stable partition through `aux` in one pass, given the size of the left side; `None` (with
-/// `refs` untouched) if `left` turns out not to be it.
+/// Stable partition from `src` into `dst` in one pass, given the size of the left side; `None`
+/// if `left` turns out not to be it.
 fn stable_partition<const A: usize>(
-    refs: &mut [PrimRef],
-    aux: &mut [PrimRef],
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
     left: usize,
     plane: Plane<A>,
 ) -> Option<(usize, Box4, Box4)> {
-    let aux = &mut aux[..refs.len()];
+    let dst = &mut dst[..src.len()];
     let mut sides = SideBounds::EMPTY;
     let (mut li, mut ri) = (0, left);
-    for r in refs.iter() {
+    for r in src {
         let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
         // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
-        let right_lane = mask_lane(right) as isize as usize;
+        let right_lane = mask_lane(right);
         let at = if right_lane == 0 { li } else { ri };
-        if let Some(d) = aux.get_mut(at) {
+        if let Some(d) = dst.get_mut(at) {
             *d = bytemuck::cast(v);
         }
         li = li.wrapping_add(1).wrapping_add(right_lane);
@@ -587,53 +665,69 @@ fn stable_partition<const A: usize>(
     if li != left {
         return None;
     }
-    refs.copy_from_slice(aux);
     let (l, r) = sides.boxes();
     Some((left, l, r))
 }
 
-/// Partitions `refs` in place into those left of `plane` first; returns the size of the left
-/// side and the centroid bounds of both sides. Branch-free (Lomuto with an unconditional
-/// swap, bounds grown with masks): which side a primitive goes to is often a coin toss, and
-/// mispredicted branches cost more than the extra stores.
-fn partition<const A: usize>(refs: &mut [PrimRef], plane: Plane<A>) -> (usize, Box4, Box4) {
+/// Partitions a range into `refs` with those left of `plane` first, reading it from `aux`
+/// when `FROM_AUX` (else in place); returns the size of the left side and the centroid
+/// bounds of both sides. Branch-free (Lomuto with an unconditional swap, bounds grown with
+/// masks): which side a primitive goes to is often a coin toss, and mispredicted branches
+/// cost more than the extra stores. From `aux` it is the same permutation: position `j` of
+/// `refs` is only read after the swap has written it.
+fn partition<const A: usize, const FROM_AUX: bool>(
+    refs: &mut [PrimRef],
+    aux: &[PrimRef],
+    plane: Plane<A>,
+) -> (usize, Box4, Box4) {
+    let aux = &aux[..refs.len()];
     let mut sides = SideBounds::EMPTY;
-    let mut i = 0u32;
+    let mut i = 0usize;
     for j in 0..refs.len() {
-        let (v, c2, right) = plane.classify(&refs[j]);
+        let r = if FROM_AUX { &aux[j] } else { &refs[j] };
+        let (v, c2, right) = plane.classify(r);
         sides.grow(c2, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
-        refs[j] = refs[i as usize];
-        refs[i as usize] = bytemuck::cast(v);
+        refs[j] = refs[i];
+        refs[i] = bytemuck::cast(v);
         // `i` advances past a left reference only.
-        i = i.wrapping_add(1).wrapping_add(mask_lane(right) as u32);
+        i = i.wrapping_add(1).wrapping_add(mask_lane(right));
     }
     let (l, r) = sides.boxes();
-    (i as usize, l, r)
+    (i, l, r)
 }
 
-/// Partitions a range by `plane` (through `aux` when large, stably), given the counts of the
-/// bins left of it. Returns the size of the left side and the centroid bounds of
-/// both sides.
+/// Partitions a range at `at` by `plane`, given the counts of the bins left of it: large
+/// ones stably into the other array, the others into `refs` (in place when there). Returns
+/// the size of the left side, the centroid bounds of both sides and where the sides are.
 fn partition_by<const A: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     plane: Plane<A>,
     left_counts: &[Count],
-) -> (usize, Box4, Box4) {
-    if refs.len() > PARALLEL_THRESHOLD * 16 {
+) -> (usize, Box4, Box4, At) {
+    if refs.len() > LARGE {
+        let (src, dst, to) = match at {
+            At::Refs => (&*refs, aux, At::Aux),
+            At::Aux => (&*aux, refs, At::Refs),
+        };
         // On one thread the bins' counts give the left side's size, so no counting pass.
         // (Every stable partition is the same: the bytes do not depend on the path.)
         let single = if rayon::current_num_threads() == 1 {
             let counted: u32 = left_counts.iter().map(|c| c.0).sum();
-            stable_partition(refs, aux, counted as usize, plane)
+            stable_partition(src, dst, counted as usize, plane)
         } else {
             None
         };
-        single.unwrap_or_else(|| parallel_partition(refs, aux, plane))
-    } else {
-        partition(refs, plane)
+        let (mid, l, r) = single.unwrap_or_else(|| parallel_partition(src, dst, plane));
+        return (mid, l, r, to);
     }
+    let (mid, l, r) = match at {
+        At::Refs => partition::<A, false>(refs, aux, plane),
+        At::Aux => partition::<A, true>(refs, aux, plane),
+    };
+    (mid, l, r, At::Refs)
 }
 
 // Not inlined into `split`: see `sweep`.
@@ -641,12 +735,15 @@ fn partition_by<const A: usize>(
 fn binned_split_n<const N: usize>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     info: &RangeInfo,
     binner: &Binner,
-) -> Option<Split> {
+) -> (Option<Split>, At) {
     let mut bins = Bins::<N>::new();
-    bin_range(&mut bins, refs, binner);
-    let (axis, bin, cost) = bins.best(binner)?;
+    bin_range(&mut bins, at.data(refs, aux), binner);
+    let Some((axis, bin, cost)) = bins.best(binner) else {
+        return (None, at);
+    };
     // Left of the plane: `!(c >= t)` on the axis.
     let t = binner.threshold(
         axis,
@@ -655,16 +752,16 @@ fn binned_split_n<const N: usize>(
         info.centroids.hi[axis],
     );
     let left_counts = &bins.counts[axis][..bin];
-    let (mid, cl, cr) = match axis {
-        0 => partition_by(refs, aux, Plane::<0>::new(t), left_counts),
-        1 => partition_by(refs, aux, Plane::<1>::new(t), left_counts),
-        _ => partition_by(refs, aux, Plane::<2>::new(t), left_counts),
+    let (mid, cl, cr, at) = match axis {
+        0 => partition_by(refs, aux, at, Plane::<0>::new(t), left_counts),
+        1 => partition_by(refs, aux, at, Plane::<1>::new(t), left_counts),
+        _ => partition_by(refs, aux, at, Plane::<2>::new(t), left_counts),
     };
     if mid == 0 || mid == refs.len() {
-        return None;
+        return (None, at);
     }
     let (lb, rb) = bins.sides(axis, bin);
-    Some(Split {
+    let split = Split {
         mid,
         left: RangeInfo {
             bounds: lb,
@@ -675,16 +772,19 @@ fn binned_split_n<const N: usize>(
             centroids: cr.aabb(),
         },
         cost,
-    })
+    };
+    (Some(split), at)
 }
 
-/// Binned split, partitioning `refs` in place (through `aux` when large).
+/// Binned split of a range at `at` (see [`partition_by`]); also says where the range is
+/// afterwards, split or not.
 fn binned_split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
     info: &RangeInfo,
     ctx: &Ctx,
-) -> Option<Split> {
+) -> (Option<Split>, At) {
     // Small ranges gain nothing from many bins; they only pay for sweeping them.
     let bins = if refs.len() < 256 {
         ctx.bins.min(8)
@@ -699,12 +799,12 @@ fn binned_split(
     };
     let binner = Binner::new(&info.centroids, bins);
     if binner.scales == [0.0; 4] {
-        return None;
+        return (None, at);
     }
     match bins {
-        8 => binned_split_n::<8>(refs, aux, info, &binner),
-        16 => binned_split_n::<16>(refs, aux, info, &binner),
-        _ => binned_split_n::<32>(refs, aux, info, &binner),
+        8 => binned_split_n::<8>(refs, aux, at, info, &binner),
+        16 => binned_split_n::<16>(refs, aux, at, info, &binner),
+        _ => binned_split_n::<32>(refs, aux, at, info, &binner),
     }
 }
 
@@ -766,23 +866,29 @@ impl Orders {
     }
 }
 
-/// Exact SAH split of a small range (2 to [`SMALL`] primitives) given its orders: sweep
-/// every position on every axis, then permute the references once, for the winning axis.
-/// Returns the split and the orders of both sides. The sides' infos carry bounds only (see
-/// [`RangeInfo::centroids`]).
-fn sweep_split(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+/// Exact SAH split of a small range (2 to [`SMALL`] primitives, the part `left`) given its
+/// orders: sweep every position on every axis, then permute the references once, for the
+/// winning axis. Makes `left` and `right` the sides, with their orders, and returns the SAH
+/// numerator of the split. The sides' infos carry bounds only (see [`RangeInfo::centroids`]).
+fn sweep_split(refs: &mut [PrimRef], orders: &Orders, left: &mut Part, right: &mut Part) -> f32 {
     // Most swept ranges have 8 or fewer primitives: half-size working arrays for them.
     if refs.len() <= 8 {
-        sweep::<8>(refs, orders)
+        sweep::<8>(refs, orders, left, right)
     } else {
-        sweep::<SMALL>(refs, orders)
+        sweep::<SMALL>(refs, orders, left, right)
     }
 }
 
 /// [`sweep_split`] for ranges of at most `L` primitives (`L` a power of two up to [`SMALL`]).
 // Not inlined: inside `split`, its frame and spills cost every split more than the call does.
+// The sides are written through `left` and `right`, straight into the node's parts.
 #[inline(never)]
-fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Orders, Orders) {
+fn sweep<const L: usize>(
+    refs: &mut [PrimRef],
+    orders: &Orders,
+    left: &mut Part,
+    right: &mut Part,
+) -> f32 {
     let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
     let mut boxes = [Box8::EMPTY; L];
@@ -811,8 +917,7 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
         }
         left_n += f32x4::ONE;
         right_n -= f32x4::ONE;
-        let right = right_area[i & (L - 1)];
-        let cost = half_areas3(&acc) * left_n + right * right_n;
+        let cost = half_areas3(&acc) * left_n + right_area[i & (L - 1)] * right_n;
         // Selects, not branches: which position wins is data, not pattern.
         let better = cost.simd_lt(best_cost);
         best_cost = better.select(cost, best_cost);
@@ -831,25 +936,27 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
     let identity: [u8; SMALL] = std::array::from_fn(|i| i as u8);
     let perm = orders.0.get(best_axis).unwrap_or(&identity);
     let mut pos = [0u8; L];
-    let (mut left, mut right) = (Box8::EMPTY, Box8::EMPTY);
+    let (mut lb, mut rb) = (Box8::EMPTY, Box8::EMPTY);
     for (i, (dst, &src)) in refs.iter_mut().zip(&perm[..n]).enumerate() {
         let b = &boxes[src as usize & (L - 1)];
         *dst = b.prim_ref();
         pos[src as usize & (L - 1)] = i as u8;
         // Both sides' bounds, grown in the new order (the same bits as from the references).
         if i < best_mid {
-            left.grow(b);
+            lb.grow(b);
         } else {
-            right.grow(b);
+            rb.grow(b);
         }
     }
-    let (left, right) = (RangeInfo::bounded(&left), RangeInfo::bounded(&right));
+    let infos = (RangeInfo::bounded(&lb), RangeInfo::bounded(&rb));
     // Each side's orders: the range's orders filtered, as positions after the permutation.
     // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
     let (mut lo, mut ro) = ([identity; 3], [identity; 3]);
+    // Sides of one or two primitives are never swept (see `split`): they need no orders.
+    let neither = best_mid <= 2 && n - best_mid <= 2;
     for k in 0..3 {
-        if k == best_axis {
+        if k == best_axis || neither {
             continue;
         }
         let (mut li, mut ri) = (0, 0);
@@ -861,13 +968,13 @@ fn sweep<const L: usize>(refs: &mut [PrimRef], orders: &Orders) -> (Split, Order
             ri += (p >= mid) as usize;
         }
     }
-    let split = Split {
-        mid: best_mid,
-        left,
-        right,
-        cost: best_cost,
+    let orders = if neither {
+        (None, None)
+    } else {
+        (Some(Orders(lo)), Some(Orders(ro)))
     };
-    (split, Orders(lo), Orders(ro))
+    left.split_into(right, best_mid, infos, orders);
+    best_cost
 }
 
 /// Splits at the object median along the widest centroid axis; always makes two non-empty
@@ -899,45 +1006,55 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
     }
 }
 
-/// Splits a range with at least two primitives; `orders` are the range's orders when a
-/// sweep split made it. Small ranges come back with the orders of both sides.
-// Inlined into `build_child`: the split and orders it returns then reach the parts without
-// going through a return slot.
+/// Splits the part `left` (a range at `at` with at least two primitives, its orders there
+/// when a sweep split made it) into itself and `right`; small ranges' sides get their orders.
+/// Returns the split's SAH numerator and where both sides are.
+// Inlined into `build_node`: the sides then reach the parts without going through a return
+// slot.
 #[inline(always)]
 fn split(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
-    info: &RangeInfo,
-    orders: Option<&Orders>,
+    at: At,
+    left: &mut Part,
+    right: &mut Part,
     ctx: &Ctx,
     depth: u32,
-) -> (Split, Option<Orders>, Option<Orders>) {
+) -> (f32, At) {
+    let whole = |s: Split, left: &mut Part, right: &mut Part| {
+        left.split_into(right, s.mid, (s.left, s.right), (None, None));
+        s.cost
+    };
     if depth >= MEDIAN_DEPTH {
-        return (median_split(refs, info), None, None);
+        at.settle(refs, aux);
+        return (whole(median_split(refs, &left.info), left, right), At::Refs);
     }
     if refs.len() == 2 {
+        at.settle(refs, aux);
         // One way to split two: no orders to sort or sweep.
         let (l, r) = (Box8::of(&refs[0]), Box8::of(&refs[1]));
         let (l, r) = (RangeInfo::bounded(&l), RangeInfo::bounded(&r));
         let cost = l.bounds.half_area() + r.bounds.half_area();
-        let one = Orders([[0; SMALL]; 3]);
-        let s = Split {
-            mid: 1,
-            left: l,
-            right: r,
-            cost,
-        };
-        return (s, Some(one), Some(one));
+        let one = Some(Orders([[0; SMALL]; 3]));
+        left.split_into(right, 1, (l, r), (one, one));
+        return (cost, At::Refs);
     }
     if refs.len() <= SMALL {
-        let (s, l, r) = match orders {
-            Some(o) => sweep_split(refs, o),
-            None => sweep_split(refs, &Orders::of(refs)),
+        at.settle(refs, aux);
+        let orders = match &left.orders {
+            Some(o) => *o,
+            None => Orders::of(refs),
         };
-        return (s, Some(l), Some(r));
+        return (sweep_split(refs, &orders, left, right), At::Refs);
     }
-    let s = binned_split(refs, aux, info, ctx).unwrap_or_else(|| median_split(refs, info));
-    (s, None, None)
+    let (s, at) = binned_split(refs, aux, at, &left.info, ctx);
+    match s {
+        Some(s) => (whole(s, left, right), at),
+        None => {
+            at.settle(refs, aux);
+            (whole(median_split(refs, &left.info), left, right), At::Refs)
+        }
+    }
 }
 
 pub fn build(
@@ -958,7 +1075,8 @@ pub fn build(
     };
     let info = RangeInfo::of(refs);
     let mut out = NodeList::new(nodes);
-    let root = build_child(refs, &mut aux[..refs.len()], 0, info, &ctx, 0, &mut out);
+    let aux = &mut aux[..refs.len()];
+    let root = build_child(refs, aux, At::Refs, 0, info, &ctx, 0, &mut out);
     out.tree(Some(root))
 }
 
@@ -974,9 +1092,33 @@ fn leaf(info: &RangeInfo, base: u32, n: usize) -> (Aabb, Child) {
     )
 }
 
+/// Builds the subtree over a range at `at`, leaving its references in final order in `refs`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
 fn build_child(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
+    at: At,
+    base: u32,
+    info: RangeInfo,
+    ctx: &Ctx,
+    depth: u32,
+    out: &mut NodeList,
+) -> (Aabb, Child) {
+    if refs.len() > LARGE {
+        build_node::<true>(refs, aux, at, base, info, ctx, depth, out)
+    } else {
+        build_node::<false>(refs, aux, at, base, info, ctx, depth, out)
+    }
+}
+
+/// [`build_child`] for a range of more than [`LARGE`] primitives when `LARGE`: only then can
+/// its parts be in `aux` (a part of a smaller range is in `refs` once the range is split).
+#[allow(clippy::too_many_arguments)]
+fn build_node<const LARGE: bool>(
+    refs: &mut [PrimRef],
+    aux: &mut [PrimRef],
+    at: At,
     base: u32,
     info: RangeInfo,
     ctx: &Ctx,
@@ -987,64 +1129,82 @@ fn build_child(
     let as_leaf = leaf(&info, base, n);
     // Fewer primitives than a node has slots: always a leaf (so every inner node is full).
     if n < WIDTH {
+        at.settle(refs, aux);
         return as_leaf;
     }
     // The first split of this node; for a leaf-sized range it also decides, by the SAH,
     // whether a leaf is cheaper.
-    let (first, first_l, first_r) = split(refs, aux, &info, None, ctx, depth);
+    let mut parts = [Part::EMPTY; WIDTH];
+    parts[0] = Part {
+        begin: 0,
+        end: n,
+        info,
+        orders: None,
+    };
+    let (first_cost, first_at) = {
+        let (l, r) = parts.split_at_mut(1);
+        split(refs, aux, at, &mut l[0], &mut r[0], ctx, depth)
+    };
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
-        if !(ctx.traversal_cost * area + first.cost < area * n as f32) {
+        if !(ctx.traversal_cost * area + first_cost < area * n as f32) {
             return as_leaf;
         }
     }
-    // The parts, field by field: a part's orders are large, and are moved only where used.
-    let mut ranges = [(0usize, 0usize); WIDTH];
-    let mut infos = [RangeInfo::EMPTY; WIDTH];
-    let mut orders: [Option<Orders>; WIDTH] = [None; WIDTH];
-    (ranges[0], infos[0], orders[0]) = ((0, first.mid), first.left, first_l);
-    (ranges[1], infos[1], orders[1]) = ((first.mid, n), first.right, first_r);
+    let mut ats = [At::Refs; WIDTH];
+    let at_of = |ats: &[At; WIDTH], j: usize| if LARGE { ats[j] } else { At::Refs };
+    (ats[0], ats[1]) = (first_at, first_at);
     // Each part's area when it has at least two primitives (else -1, never picked).
-    let area = |(begin, end): (usize, usize), info: &RangeInfo| {
-        if end - begin >= 2 {
-            info.bounds.half_area()
+    // (`Aabb::half_area`, 0 for an empty box or one with a NaN, without its branches.)
+    let area = |p: &Part| {
+        let b = &p.info.bounds;
+        let d = [b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]];
+        let half_area = d[0] * d[1] + d[1] * d[2] + d[2] * d[0];
+        let full = (b.lo[0] <= b.hi[0]) & (b.lo[1] <= b.hi[1]) & (b.lo[2] <= b.hi[2]);
+        let half_area = if full { half_area } else { 0.0 };
+        if p.end - p.begin >= 2 {
+            half_area
         } else {
             -1.0
         }
     };
     let mut areas = [-1.0f32; WIDTH];
-    areas[0] = area(ranges[0], &infos[0]);
-    areas[1] = area(ranges[1], &infos[1]);
+    areas[0] = area(&parts[0]);
+    areas[1] = area(&parts[1]);
     // Slot order as a list: part 0 starts the range, and a split part's right side follows
     // it (no sort of the parts afterwards).
     let mut next = [0u8; WIDTH];
     next[0] = 1;
     let mut count = 2;
     while count < WIDTH {
-        // Split the part with the largest area that has at least two primitives.
-        let mut pick = None;
-        let mut best_area = -1.0f32;
-        for (i, &a) in areas[..count].iter().enumerate() {
-            if a > best_area {
-                best_area = a;
-                pick = Some(i);
-            }
+        // Split the (first) part with the largest area that has at least two primitives.
+        // Over all slots with selects, not branches (slots not made yet have -1): which part
+        // wins is data, not pattern.
+        let (mut pick, mut best_area) = (WIDTH, -1.0f32);
+        for (i, &a) in areas.iter().enumerate() {
+            let better = a > best_area;
+            best_area = if better { a } else { best_area };
+            pick = if better { i } else { pick };
         }
-        let Some(i) = pick else { break };
-        let (begin, end) = ranges[i];
-        let (s, lo, ro) = split(
+        if pick == WIDTH {
+            break;
+        }
+        let i = pick;
+        let (head, tail) = parts.split_at_mut(count);
+        let (left, right) = (&mut head[i], &mut tail[0]);
+        let (begin, end) = (left.begin, left.end);
+        let (_, s_at) = split(
             &mut refs[begin..end],
             &mut aux[begin..end],
-            &infos[i],
-            orders[i].as_ref(),
+            at_of(&ats, i),
+            left,
+            right,
             ctx,
             depth,
         );
-        let mid = begin + s.mid;
-        (ranges[i], infos[i], orders[i]) = ((begin, mid), s.left, lo);
-        (ranges[count], infos[count], orders[count]) = ((mid, end), s.right, ro);
-        areas[i] = area(ranges[i], &infos[i]);
-        areas[count] = area(ranges[count], &infos[count]);
+        (ats[i], ats[count]) = (s_at, s_at);
+        areas[i] = area(left);
+        areas[count] = area(right);
         next[count] = next[i];
         next[i] = count as u8;
         count += 1;
@@ -1059,17 +1219,19 @@ fn build_child(
             j
         });
         // Hand each part its own disjoint slice, then build them in parallel.
-        type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], u32, RangeInfo)>;
+        type Slot<'r> = Option<(&'r mut [PrimRef], &'r mut [PrimRef], At, u32, RangeInfo)>;
         let mut slices: [Slot; WIDTH] = Default::default();
         let (mut rest, mut aux_rest) = (refs, aux);
         let mut at = 0;
         for (slot, &j) in slices.iter_mut().zip(&in_order[..count]) {
-            let (begin, end) = ranges[j];
+            let Part {
+                begin, end, info, ..
+            } = parts[j];
             let (_, tail) = rest.split_at_mut(begin - at);
             let (mine, tail) = tail.split_at_mut(end - begin);
             let (_, atail) = aux_rest.split_at_mut(begin - at);
             let (amine, atail) = atail.split_at_mut(end - begin);
-            *slot = Some((mine, amine, base + begin as u32, infos[j]));
+            *slot = Some((mine, amine, at_of(&ats, j), base + begin as u32, info));
             rest = tail;
             aux_rest = atail;
             at = end;
@@ -1079,9 +1241,9 @@ fn build_child(
         let built: Vec<((Aabb, Child), NodeList)> = slices
             .into_par_iter()
             .flatten()
-            .map(|(s, a, b, i)| {
+            .map(|(s, a, at, b, i)| {
                 let mut sub = NodeList::with_capacity(node_hint(s.len()));
-                let c = build_child(s, a, b, i, ctx, depth + 1, &mut sub);
+                let c = build_child(s, a, at, b, i, ctx, depth + 1, &mut sub);
                 (c, sub)
             })
             .collect();
@@ -1092,16 +1254,22 @@ fn build_child(
         // The parts in slot order, each on its own piece of the range.
         let mut j = 0;
         for k in 0..count {
-            let (begin, end) = ranges[j];
+            let (begin, end) = (parts[j].begin, parts[j].end);
             let first = base + begin as u32;
-            // Most children are small leaves: made here, without a call.
-            let (b, c) = if end - begin < WIDTH {
-                leaf(&infos[j], first, end - begin)
+            // Most children are small leaves: made here, without a call, their box set
+            // straight from the part.
+            if end - begin < WIDTH {
+                if LARGE {
+                    ats[j].settle(&mut refs[begin..end], &aux[begin..end]);
+                }
+                let (b, c) = leaf(&parts[j].info, first, end - begin);
+                tree::set_child(&mut node, k, &b, c);
             } else {
                 let (s, a) = (&mut refs[begin..end], &mut aux[begin..end]);
-                build_child(s, a, first, infos[j], ctx, depth + 1, out)
-            };
-            tree::set_child(&mut node, k, &b, c);
+                let info = parts[j].info;
+                let (b, c) = build_child(s, a, at_of(&ats, j), first, info, ctx, depth + 1, out);
+                tree::set_child(&mut node, k, &b, c);
+            }
             j = next[j] as usize & (WIDTH - 1);
         }
     }
@@ -1240,9 +1408,17 @@ mod tests {
                     }
                 }));
                 let orders = Orders::of(&refs);
-                let (s, lo, ro) = sweep_split(&mut refs, &orders);
-                assert!(s.mid > 0 && s.mid < n);
-                for (side, o) in [(&refs[..s.mid], lo), (&refs[s.mid..], ro)] {
+                let (mut left, mut right) = (Part::EMPTY, Part::EMPTY);
+                left.end = n;
+                sweep_split(&mut refs, &orders, &mut left, &mut right);
+                let mid = left.end;
+                assert!(mid > 0 && mid < n && (right.begin, right.end) == (mid, n));
+                for (side, part) in [(&refs[..mid], left), (&refs[mid..], right)] {
+                    // Sides of one or two are never swept; the others always get orders.
+                    let Some(o) = part.orders else {
+                        assert!(mid <= 2 && n - mid <= 2, "a swept side without orders");
+                        continue;
+                    };
                     let fresh = Orders::of(side);
                     for k in 0..3 {
                         assert_eq!(o.0[k][..side.len()], fresh.0[k][..side.len()]);
