@@ -824,16 +824,17 @@ impl<P: StoredPrim> Tree<'_, P> {
             prim: prim_base,
         };
         let node_end = node_base + nodes.len();
+        let prim_end = prim_base + prims.len();
         let mut w = Walk {
             src,
             ids,
             nodes,
             prims,
             node_base,
+            prim_base,
         };
         let b = to_aabb(w.node(node_base, &mut at, 1)?);
-        // (Each leaf took its primitives off the front of `prims`.)
-        (at.node == node_end && w.prims.is_empty()).then_some(b)
+        (at.node == node_end && at.prim == prim_end).then_some(b)
     }
 
     /// Splits the root's used slots into tasks (an inner child's subtree, or a leaf), refits
@@ -954,14 +955,15 @@ fn leftmost_prim(nodes: &[Node], base: usize, mut c: usize) -> Option<usize> {
     None
 }
 
-/// A sequential walk over a subtree: `nodes` start at global `node_base`; `prims` (with their
-/// `ids`) are the primitives not yet reached, from global `at.prim` on.
+/// A sequential walk over a subtree: `nodes` start at global `node_base`, `prims` (with their
+/// `ids`) at global `prim_base`.
 struct Walk<'w, 't, S: Source> {
     src: &'w S,
     ids: &'t [u32],
     nodes: &'t mut [Node],
     prims: &'t mut [S::Prim],
     node_base: usize,
+    prim_base: usize,
 }
 
 impl<S: Source> Walk<'_, '_, S> {
@@ -988,17 +990,14 @@ impl<S: Source> Walk<'_, '_, S> {
                 if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
                     return None;
                 }
+                let leaf = at.prim - self.prim_base..at.prim - self.prim_base + n;
                 at.prim += n;
-                let (prims, rest) = std::mem::take(&mut self.prims).split_at_mut_checked(n)?;
-                self.prims = rest;
                 let ids = if S::READS_IDS {
-                    let (ids, rest) = self.ids.split_at_checked(n)?;
-                    self.ids = rest;
-                    ids
+                    self.ids.get(leaf.clone())?
                 } else {
                     &[]
                 };
-                self.src.leaf(ids, prims)?
+                self.src.leaf(ids, self.prims.get_mut(leaf)?)?
             } else {
                 let c = c as usize;
                 if c != at.node {
