@@ -184,11 +184,13 @@ impl StoredPrim for [f32; 9] {
         // no bit, and leaf sizes (mostly 1-4, in no predictable order) would otherwise cost
         // a mispredicted loop exit per leaf.
         let mut g = Box4::EMPTY;
-        g.grow(&triangle(&prims[0]));
-        g.grow(&triangle(&prims[1.min(last)]));
+        let first = &prims[0];
+        g.grow(&triangle(first));
+        g.grow(&triangle(prims.get(1).unwrap_or(first)));
         if last >= 2 {
-            g.grow(&triangle(&prims[2]));
-            g.grow(&triangle(&prims[3.min(last)]));
+            let third = &prims[2];
+            g.grow(&triangle(third));
+            g.grow(&triangle(prims.get(3).unwrap_or(third)));
             for f in prims.get(4..).unwrap_or_default() {
                 g.grow(&triangle(f));
             }
