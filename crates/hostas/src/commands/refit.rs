@@ -698,6 +698,8 @@ fn scattered(ids: &[u32]) -> bool {
 /// Rewrites the stored triangles (`prims`, ids `ids`) in primitive order: the application's
 /// buffers are read in sequence, the stored ones written at random. `None` if any triangle is
 /// not valid or the ids are not distinct (the general path then takes over).
+// (Not inlined: compiled on its own, its loops keep every pointer and length in a register.)
+#[inline(never)]
 fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     d: &TriF32<I, V>,
     ids: &[u32],
