@@ -183,9 +183,10 @@ impl StoredPrim for [f32; 9] {
         // triangle repeated where it has fewer: a union with a box already taken in changes
         // no bit, and leaf sizes (mostly 1-4, in no predictable order) would otherwise cost
         // a mispredicted loop exit per leaf.
-        let mut g = Box4::EMPTY;
+        // (The union of the empty box with a box is that box, NaN lanes included:
+        // `fmin(+inf, x)` is `x`.)
         let first = &prims[0];
-        g.grow(&triangle(first));
+        let mut g = triangle(first);
         g.grow(&triangle(prims.get(1).unwrap_or(first)));
         if last >= 2 {
             let third = &prims[2];
