@@ -669,9 +669,13 @@ fn refit_triangles<I: Indices, V: Vertices>(
     let slot: &mut [u32] = bytemuck::try_cast_slice_mut(slot_bytes).ok()?;
     // On the VM: 1M soup +10%, 1M boxes and sphere +25%; the bunny (69k) 10% slower.
     if prims.len() >= PREFETCH_MIN_PRIMS {
-        in_primitive_order::<I, V, true>(&d, ids, prims, slot)?;
+        // The slots only where consecutive stored triangles are often far apart in primitive
+        // order (a soup, the boxes); in a mesh the slots written last are still in the
+        // caches (the 1M sphere: 6% fewer instructions, no slower).
+        let far_slots = 16 * far_pairs(ids, 1 << 14) > SAMPLES;
+        in_primitive_order::<I, V, true>(&d, ids, prims, slot, far_slots)?;
     } else {
-        in_primitive_order::<I, V, false>(&d, ids, prims, slot)?;
+        in_primitive_order::<I, V, false>(&d, ids, prims, slot, false)?;
     }
     Tree { ids, nodes, prims }.refit(&Written)
 }
@@ -681,19 +685,26 @@ const PREFETCH_MIN_PRIMS: usize = 1 << 18;
 
 /// Whether consecutive stored primitives are mostly far apart in primitive order (sampled).
 fn scattered(ids: &[u32]) -> bool {
+    2 * far_pairs(ids, 1 << 16) > SAMPLES
+}
+
+/// Pairs of consecutive stored primitives sampled by [`far_pairs`].
+const SAMPLES: usize = 1024;
+
+/// How many of [`SAMPLES`] pairs of consecutive stored primitives, evenly spread, are more
+/// than `distance` apart in primitive order; none below 2^16 primitives.
+fn far_pairs(ids: &[u32], distance: u32) -> usize {
     const MIN: usize = 1 << 16;
-    const SAMPLES: usize = 1024;
     if ids.len() < MIN {
-        return false;
+        return 0;
     }
     let step = ids.len() / SAMPLES;
-    let far = (0..SAMPLES)
+    (0..SAMPLES)
         .filter(|&i| {
             let s = i * step;
-            ids[s].abs_diff(ids[s + 1]) > 1 << 16
+            ids[s].abs_diff(ids[s + 1]) > distance
         })
-        .count();
-    2 * far > SAMPLES
+        .count()
 }
 
 /// Rewrites the stored triangles (`prims`, ids `ids`) in primitive order: the application's
@@ -706,17 +717,20 @@ fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     ids: &[u32],
     prims: &mut [[f32; 9]],
     slot: &mut [u32],
+    far_slots: bool,
 ) -> Option<()> {
     // Both loops write at random (a soup's leaves are scattered over primitive order). With
-    // `AHEAD` (structures larger than the caches), the lines they will write are requested
-    // this many iterations ahead, so that the misses overlap instead of following one another;
-    // the last iterations, with nothing left to request, run in a loop of their own.
+    // `AHEAD` (structures larger than the caches), the lines they will write (the slots' only
+    // with `far_slots`) are requested this many iterations ahead, so that the misses overlap
+    // instead of following one another; the last iterations, with nothing left to request,
+    // run in a loop of their own.
     const SLOTS_AHEAD: usize = 32;
     const PRIMS_AHEAD: usize = 64;
     let first = d.first;
     slot.fill(NONE);
     let ahead_len = |len: usize, ahead: usize| if AHEAD { len.saturating_sub(ahead) } else { 0 };
-    let (head, tail) = ids.split_at(ahead_len(ids.len(), SLOTS_AHEAD));
+    let slots_ahead = if far_slots { SLOTS_AHEAD } else { ids.len() };
+    let (head, tail) = ids.split_at(ahead_len(ids.len(), slots_ahead));
     let later = ids.get(SLOTS_AHEAD..).unwrap_or(&[]);
     for (s, (&id, &ahead)) in head.iter().zip(later).enumerate() {
         if let Some(x) = slot.get(ahead.wrapping_sub(first) as usize) {
