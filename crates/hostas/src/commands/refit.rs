@@ -192,8 +192,10 @@ impl StoredPrim for [f32; 9] {
             let third = &prims[2];
             g.grow(&triangle(third));
             g.grow(&triangle(prims.get(3).unwrap_or(third)));
-            for f in prims.get(4..).unwrap_or_default() {
-                g.grow(&triangle(f));
+            if last >= 4 {
+                for f in &prims[4..] {
+                    g.grow(&triangle(f));
+                }
             }
         }
         lanes(g)
