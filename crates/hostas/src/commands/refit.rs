@@ -183,14 +183,19 @@ impl StoredPrim for [f32; 9] {
         // triangle repeated where it has fewer: a union with a box already taken in changes
         // no bit, and leaf sizes (mostly 1-4, in no predictable order) would otherwise cost
         // a mispredicted loop exit per leaf.
-        let mut g = Box4::EMPTY;
-        g.grow(&triangle(&prims[0]));
-        g.grow(&triangle(&prims[1.min(last)]));
+        // (The union of the empty box with a box is that box, NaN lanes included:
+        // `fmin(+inf, x)` is `x`.)
+        let first = &prims[0];
+        let mut g = triangle(first);
+        g.grow(&triangle(prims.get(1).unwrap_or(first)));
         if last >= 2 {
-            g.grow(&triangle(&prims[2]));
-            g.grow(&triangle(&prims[3.min(last)]));
-            for f in prims.get(4..).unwrap_or_default() {
-                g.grow(&triangle(f));
+            let third = &prims[2];
+            g.grow(&triangle(third));
+            g.grow(&triangle(prims.get(3).unwrap_or(third)));
+            if last >= 4 {
+                for f in &prims[4..] {
+                    g.grow(&triangle(f));
+                }
             }
         }
         lanes(g)
@@ -666,9 +671,13 @@ fn refit_triangles<I: Indices, V: Vertices>(
     let slot: &mut [u32] = bytemuck::try_cast_slice_mut(slot_bytes).ok()?;
     // On the VM: 1M soup +10%, 1M boxes and sphere +25%; the bunny (69k) 10% slower.
     if prims.len() >= PREFETCH_MIN_PRIMS {
-        in_primitive_order::<I, V, true>(&d, ids, prims, slot)?;
+        // The slots only where consecutive stored triangles are often far apart in primitive
+        // order (a soup, the boxes); in a mesh the slots written last are still in the
+        // caches (the 1M sphere: 6% fewer instructions, no slower).
+        let far_slots = 16 * far_pairs(ids, 1 << 14) > SAMPLES;
+        in_primitive_order::<I, V, true>(&d, ids, prims, slot, far_slots)?;
     } else {
-        in_primitive_order::<I, V, false>(&d, ids, prims, slot)?;
+        in_primitive_order::<I, V, false>(&d, ids, prims, slot, false)?;
     }
     Tree { ids, nodes, prims }.refit(&Written)
 }
@@ -678,40 +687,52 @@ const PREFETCH_MIN_PRIMS: usize = 1 << 18;
 
 /// Whether consecutive stored primitives are mostly far apart in primitive order (sampled).
 fn scattered(ids: &[u32]) -> bool {
+    2 * far_pairs(ids, 1 << 16) > SAMPLES
+}
+
+/// Pairs of consecutive stored primitives sampled by [`far_pairs`].
+const SAMPLES: usize = 1024;
+
+/// How many of [`SAMPLES`] pairs of consecutive stored primitives, evenly spread, are more
+/// than `distance` apart in primitive order; none below 2^16 primitives.
+fn far_pairs(ids: &[u32], distance: u32) -> usize {
     const MIN: usize = 1 << 16;
-    const SAMPLES: usize = 1024;
     if ids.len() < MIN {
-        return false;
+        return 0;
     }
     let step = ids.len() / SAMPLES;
-    let far = (0..SAMPLES)
+    (0..SAMPLES)
         .filter(|&i| {
             let s = i * step;
-            ids[s].abs_diff(ids[s + 1]) > 1 << 16
+            ids[s].abs_diff(ids[s + 1]) > distance
         })
-        .count();
-    2 * far > SAMPLES
+        .count()
 }
 
 /// Rewrites the stored triangles (`prims`, ids `ids`) in primitive order: the application's
 /// buffers are read in sequence, the stored ones written at random. `None` if any triangle is
 /// not valid or the ids are not distinct (the general path then takes over).
+// (Not inlined: compiled on its own, its loops keep every pointer and length in a register.)
+#[inline(never)]
 fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     d: &TriF32<I, V>,
     ids: &[u32],
     prims: &mut [[f32; 9]],
     slot: &mut [u32],
+    far_slots: bool,
 ) -> Option<()> {
     // Both loops write at random (a soup's leaves are scattered over primitive order). With
-    // `AHEAD` (structures larger than the caches), the lines they will write are requested
-    // this many iterations ahead, so that the misses overlap instead of following one another;
-    // the last iterations, with nothing left to request, run in a loop of their own.
+    // `AHEAD` (structures larger than the caches), the lines they will write (the slots' only
+    // with `far_slots`) are requested this many iterations ahead, so that the misses overlap
+    // instead of following one another; the last iterations, with nothing left to request,
+    // run in a loop of their own.
     const SLOTS_AHEAD: usize = 32;
     const PRIMS_AHEAD: usize = 64;
     let first = d.first;
     slot.fill(NONE);
     let ahead_len = |len: usize, ahead: usize| if AHEAD { len.saturating_sub(ahead) } else { 0 };
-    let (head, tail) = ids.split_at(ahead_len(ids.len(), SLOTS_AHEAD));
+    let slots_ahead = if far_slots { SLOTS_AHEAD } else { ids.len() };
+    let (head, tail) = ids.split_at(ahead_len(ids.len(), slots_ahead));
     let later = ids.get(SLOTS_AHEAD..).unwrap_or(&[]);
     for (s, (&id, &ahead)) in head.iter().zip(later).enumerate() {
         if let Some(x) = slot.get(ahead.wrapping_sub(first) as usize) {
@@ -824,16 +845,17 @@ impl<P: StoredPrim> Tree<'_, P> {
             prim: prim_base,
         };
         let node_end = node_base + nodes.len();
+        let prim_end = prim_base + prims.len();
         let mut w = Walk {
             src,
             ids,
             nodes,
             prims,
             node_base,
+            prim_base,
         };
         let b = to_aabb(w.node(node_base, &mut at, 1)?);
-        // (Each leaf took its primitives off the front of `prims`.)
-        (at.node == node_end && w.prims.is_empty()).then_some(b)
+        (at.node == node_end && at.prim == prim_end).then_some(b)
     }
 
     /// Splits the root's used slots into tasks (an inner child's subtree, or a leaf), refits
@@ -954,14 +976,15 @@ fn leftmost_prim(nodes: &[Node], base: usize, mut c: usize) -> Option<usize> {
     None
 }
 
-/// A sequential walk over a subtree: `nodes` start at global `node_base`; `prims` (with their
-/// `ids`) are the primitives not yet reached, from global `at.prim` on.
+/// A sequential walk over a subtree: `nodes` start at global `node_base`, `prims` (with their
+/// `ids`) at global `prim_base`.
 struct Walk<'w, 't, S: Source> {
     src: &'w S,
     ids: &'t [u32],
     nodes: &'t mut [Node],
     prims: &'t mut [S::Prim],
     node_base: usize,
+    prim_base: usize,
 }
 
 impl<S: Source> Walk<'_, '_, S> {
@@ -988,17 +1011,14 @@ impl<S: Source> Walk<'_, '_, S> {
                 if (c & !LEAF_BIT) as usize != at.prim || !(1..=MAX_LEAF_SIZE).contains(&n) {
                     return None;
                 }
+                let leaf = at.prim - self.prim_base..at.prim - self.prim_base + n;
                 at.prim += n;
-                let (prims, rest) = std::mem::take(&mut self.prims).split_at_mut_checked(n)?;
-                self.prims = rest;
                 let ids = if S::READS_IDS {
-                    let (ids, rest) = self.ids.split_at_checked(n)?;
-                    self.ids = rest;
-                    ids
+                    self.ids.get(leaf.clone())?
                 } else {
                     &[]
                 };
-                self.src.leaf(ids, prims)?
+                self.src.leaf(ids, self.prims.get_mut(leaf)?)?
             } else {
                 let c = c as usize;
                 if c != at.node {
