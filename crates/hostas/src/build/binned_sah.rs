@@ -43,6 +43,14 @@ impl Box8 {
     fn grow(&mut self, o: &Box8) {
         self.0 = fmin8(self.0, o.0);
     }
+    /// Grows to hold `o`, ignoring its NaN lanes: for merging partial bins, which rayon may
+    /// group differently on another thread count. With NaN as the identity the merge is
+    /// associative, so the bytes stay the same even on input whose NaN components the spec
+    /// leaves undefined (no other input has NaN bounds).
+    #[inline(always)]
+    fn merge(&mut self, o: &Box8) {
+        self.0 = o.0.is_nan().select(self.0, fmin8(self.0, o.0));
+    }
     #[inline(always)]
     fn halves(&self) -> (f32x4, f32x4) {
         let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(self.0);
@@ -143,9 +151,18 @@ impl RangeInfo {
         centroids: Aabb::EMPTY,
     };
 
+    /// Unites the infos of two consecutive chunks, ignoring NaN bounds of `b` (see
+    /// [`Box8::merge`]; the centroids' bounds never hold NaN).
     fn merge(a: RangeInfo, b: RangeInfo) -> RangeInfo {
+        let keep = |x: [f32; 3], y: [f32; 3]| {
+            std::array::from_fn(|k| if y[k].is_nan() { x[k] } else { y[k] })
+        };
+        let bounds = Aabb {
+            lo: keep(a.bounds.lo, b.bounds.lo),
+            hi: keep(a.bounds.hi, b.bounds.hi),
+        };
         RangeInfo {
-            bounds: a.bounds.union(&b.bounds),
+            bounds: a.bounds.union(&bounds),
             centroids: a.centroids.union(&b.centroids),
         }
     }
@@ -392,7 +409,7 @@ impl<const N: usize> Bins<N> {
         for k in 0..3 {
             for i in 0..N {
                 self.counts[k][i].0 += b.counts[k][i].0;
-                self.bounds[k][i].grow(&b.bounds[k][i]);
+                self.bounds[k][i].merge(&b.bounds[k][i]);
             }
         }
     }
