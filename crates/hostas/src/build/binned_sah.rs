@@ -405,16 +405,24 @@ impl<const N: usize> Bins<N> {
             self.add(&binner.offsets2(&b, &b), &b);
         }
     }
+    /// Adds the bins of `b`, filled from the primitives after (or between) this one's.
     fn merge_from(&mut self, b: &Bins<N>) {
+        for k in 0..3 {
+            for i in 0..N {
+                self.counts[k][i].0 += b.counts[k][i].0;
+                self.bounds[k][i].grow(&b.bounds[k][i]);
+            }
+        }
+    }
+    /// [`Bins::merge_from`] for the partial bins of parallel chunks, in whatever grouping
+    /// rayon makes: NaN lanes ignored (see [`Box8::merge`]).
+    fn merge(mut self, b: Bins<N>) -> Bins<N> {
         for k in 0..3 {
             for i in 0..N {
                 self.counts[k][i].0 += b.counts[k][i].0;
                 self.bounds[k][i].merge(&b.bounds[k][i]);
             }
         }
-    }
-    fn merge(mut self, b: Bins<N>) -> Bins<N> {
-        self.merge_from(&b);
         self
     }
 
