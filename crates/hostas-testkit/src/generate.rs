@@ -75,9 +75,12 @@ pub fn random_transform(r: &mut Rand, allow_mirror: bool) -> Affine {
     m
 }
 
-/// Random triangles: a soup with some degenerate, inactive, huge and tiny ones, indexed or not.
+/// Random triangles: a soup with some degenerate, inactive, huge and tiny ones, indexed or not;
+/// half of the indexed ones are strips (each triangle shares two vertices with the previous
+/// one, as meshes share them, so that builds store them as indexed triangles).
 pub fn random_triangles(r: &mut Rand, n: usize, adversarial: bool) -> GeometryDesc {
     let indexed = r.gen_bool(0.5);
+    let strip = indexed && r.gen_bool(0.5);
     let mut positions = Vec::new();
     let mut indices = Vec::new();
     for i in 0..n {
@@ -111,7 +114,14 @@ pub fn random_triangles(r: &mut Rand, n: usize, adversarial: bool) -> GeometryDe
                 _ => {}
             }
         }
-        if indexed {
+        if strip && i > 0 {
+            let base = positions.len() as u32;
+            positions.push(tri[2]);
+            indices.extend_from_slice(&[base - 2, base - 1, base]);
+        } else if strip {
+            positions.extend_from_slice(&tri);
+            indices.extend_from_slice(&[0, 1, 2]);
+        } else if indexed {
             let base = positions.len() as u32;
             positions.extend_from_slice(&tri);
             // Shuffle the index order a little, and sometimes share vertices with the previous triangle.

@@ -19,6 +19,10 @@ pub struct Statistics {
     pub node_count: u32,
     pub leaf_count: u32,
     pub depth: u32,
+    /// Triangles stored indexed into shared vertices (`layout::indexed`), and how many
+    /// vertices they share (0 when direct).
+    pub indexed_triangles: bool,
+    pub vertex_count: u32,
     /// SAH cost with a node visit and a primitive test both costing 1, relative to the root
     /// box (see `layout::encode`), as built.
     pub sah_cost: f32,
@@ -54,6 +58,11 @@ impl Statistics {
             node_count: h.node_count,
             leaf_count,
             depth: h.depth,
+            indexed_triangles: matches!(
+                v.triangles,
+                crate::layout::triangles::Triangles::Indexed(_)
+            ),
+            vertex_count: h.vertex_count,
             sah_cost: h.sah_cost,
             used_bytes: h.used_size,
             allocated_bytes: h.allocated_size,

@@ -9,6 +9,7 @@ use crate::input::aabbs::AabbReader;
 use crate::input::instances::{Instance, InstanceReader};
 use crate::input::triangles::{F32Layout, TriangleReader};
 use crate::input::{BuildGeometryInfo, BuildRangeInfo, GeometryData};
+use crate::layout;
 use crate::layout::encode::{self, HeaderFields};
 use crate::layout::plan::{self, Plan};
 use crate::layout::view::{self, View};
@@ -552,7 +553,11 @@ impl Device {
             header_flags,
             preset: preset.id,
         };
-        let data = &*data;
+        // Fast builds keep their triangles direct (build time is their preference), and so
+        // does a structure that allows update (which rewrites each triangle in place).
+        let index_tris = prim_kind == PrimKind::Triangles
+            && preset.algorithm != Algorithm::Morton
+            && !flags.contains(vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE);
         self.with_dst_src(dst, None, at, |bytes, _| {
             if tris_direct {
                 // The Morton builder reads the triangles, and its leaves gather them and their
@@ -560,7 +565,7 @@ impl Device {
                 let (prims, ids, nodes) = encode::sections(bytes, &plan, TRI_BYTES, stored)?;
                 let cast = |e| internal(&format!("triangle records: {e}"));
                 let tree = build::morton::build_triangles(
-                    bytemuck::try_cast_slice(data).map_err(cast)?,
+                    bytemuck::try_cast_slice(&*data).map_err(cast)?,
                     bytemuck::try_cast_slice_mut(prims).map_err(cast)?,
                     ids,
                     keys,
@@ -583,7 +588,13 @@ impl Device {
                 encode::node_section(bytes, &plan)?,
             );
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
-            write_prims(bytes, &header, prim_kind, order, data)
+            write_prims(bytes, &header, prim_kind, order, data)?;
+            if index_tris {
+                // The decoded triangles are not needed any more: their scratch holds the
+                // records and vertices while they are made.
+                share_vertices(bytes, &readers, &records, data)?;
+            }
+            Ok(())
         })
     }
 
@@ -1201,6 +1212,58 @@ fn internal(what: &str) -> Error {
 }
 
 /// Writes the primitive sections in the tree's final order.
+/// Rewrites the built triangles in `bytes` as indexed ones sharing the application's
+/// vertices (same geometry, same vertex index), where that makes the structure smaller.
+fn share_vertices(
+    bytes: &mut [u8],
+    readers: &[Reader],
+    records: &[GeometryRecord],
+    scratch: &mut [u8],
+) -> Result<bool> {
+    // Each indexed geometry's vertex numbers (0..=maxVertex) get keys of their own.
+    let mut geometries = Vec::with_capacity(records.len());
+    let mut key_count = 0u64;
+    for (r, reader) in records.iter().zip(readers) {
+        let Reader::Triangles(t) = reader else {
+            return Ok(false);
+        };
+        let indexed = t.indexed_vertices();
+        geometries.push((r.first_primitive, key_count, indexed));
+        key_count += indexed.map_or(0, |v| v.max_vertex() + 1);
+    }
+    // At most this many vertices get stored (a geometry without indices shares none): when
+    // even that many would not fit, sharing cannot pay (a triangle soup) and is not tried.
+    let bound: u64 = records
+        .iter()
+        .zip(&geometries)
+        .map(|(r, g)| {
+            let corners = 3 * r.primitive_count as u64;
+            g.2.map_or(corners, |v| corners.min(v.max_vertex() + 1))
+        })
+        .sum();
+    if !layout::indexed::may_pay(
+        bound,
+        records.iter().map(|r| r.primitive_count as u64).sum(),
+    ) {
+        return Ok(false);
+    }
+    let single = match geometries[..] {
+        [(_, _, g)] => g,
+        _ => None,
+    };
+    let keys = |_slot: usize, id: u32| {
+        // One geometry (the common case) needs no lookup.
+        if let Some(g) = single {
+            return g.triangle(id);
+        }
+        let at = geometries.partition_point(|g| g.0 <= id).checked_sub(1)?;
+        let (first, base, g) = geometries[at];
+        let v = g?.triangle(id - first)?;
+        Some(v.map(|v| base + v))
+    };
+    layout::indexed::share_vertices(bytes, keys, key_count, scratch)
+}
+
 fn write_prims(
     bytes: &mut [u8],
     h: &Header,

@@ -23,6 +23,42 @@ pub struct F32Layout<'a> {
     pub transform: Option<Affine>,
 }
 
+/// Which vertices an indexed geometry's triangles use, read straight from its index buffer.
+#[derive(Clone, Copy, Debug)]
+pub struct IndexedVertices<'a> {
+    /// From `primitiveOffset`.
+    index_data: &'a [u8],
+    /// 2 or 4.
+    index_size: usize,
+    first_vertex: u64,
+    max_vertex: u64,
+}
+
+impl IndexedVertices<'_> {
+    /// The vertex numbers (`firstVertex` included, at most `maxVertex`) of triangle `i`;
+    /// `None` where its indices are not in the buffer or exceed `maxVertex`.
+    #[inline(always)]
+    pub fn triangle(&self, i: u32) -> Option<[u64; 3]> {
+        let at = 3 * self.index_size * i as usize;
+        let v = if self.index_size == 4 {
+            let b: [u8; 12] = self.index_data.get(at..at + 12)?.try_into().ok()?;
+            let w: [u32; 3] = bytemuck::cast(b);
+            w.map(|x| u32::from_le(x) as u64)
+        } else {
+            let b: [u8; 6] = self.index_data.get(at..at + 6)?.try_into().ok()?;
+            let w: [u16; 3] = bytemuck::cast(b);
+            w.map(|x| u16::from_le(x) as u64)
+        };
+        let v = v.map(|x| x + self.first_vertex);
+        (v[0].max(v[1]).max(v[2]) <= self.max_vertex).then_some(v)
+    }
+
+    /// Vertex numbers are at most this.
+    pub fn max_vertex(&self) -> u64 {
+        self.max_vertex
+    }
+}
+
 /// A validated view of one triangle geometry's range, ready to decode triangle `i`.
 #[derive(Clone, Copy, Debug)]
 pub struct TriangleReader<'a> {
@@ -202,6 +238,22 @@ impl<'a> TriangleReader<'a> {
             first_vertex: usize::try_from(self.first_vertex).ok()?,
             max_vertex: self.data.max_vertex as usize,
             transform: self.transform,
+        })
+    }
+
+    /// The geometry's index buffer as [`IndexedVertices`] (`None` without indices).
+    pub fn indexed_vertices(&self) -> Option<IndexedVertices<'a>> {
+        if self.index_size == 0 {
+            return None;
+        }
+        Some(IndexedVertices {
+            index_data: self
+                .data
+                .index_data?
+                .get(usize::try_from(self.primitive_offset).ok()?..)?,
+            index_size: self.index_size as usize,
+            first_vertex: self.first_vertex,
+            max_vertex: self.data.max_vertex as u64,
         })
     }
 

@@ -160,7 +160,10 @@ pub fn encode(
         node_capacity: plan.node_capacity as u32,
         prim_capacity: plan.prim_capacity as u32,
         sah_cost: sah,
-        reserved: [0; 31],
+        triangle_format: super::TRIANGLES_DIRECT,
+        vertices_offset: 0,
+        vertex_count: 0,
+        reserved: [0; 27],
     };
     dst[..HEADER_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&header));
     Ok(header)

@@ -12,7 +12,10 @@
 //! geometries   GeometryRecord per geometry (48 bytes): first primitive, counts, formats, flags
 //!              (what update and the ray query's geometry lookup need)
 //! prims        the stored (active) primitives in leaf order:
-//!              triangles: [f32; 9] vertices after the geometry transform, in index order
+//!              triangles, direct: [f32; 9] vertices after the geometry transform, in
+//!                index order
+//!              triangles, indexed: TriRecord (8 bytes) per triangle, then (its own
+//!                section, `vertices_offset`) the shared vertices, [f32; 3] each
 //!              AABBs: [f32; 6]
 //!              instances: InstanceRecord (128 bytes)
 //! prim_ids     u32 per stored primitive: the primitive's sequence number across all geometries
@@ -23,7 +26,9 @@
 //! Every section starts at a multiple of [`SECTION_ALIGN`]. All fields are little-endian.
 
 pub mod encode;
+pub mod indexed;
 pub mod plan;
+pub mod triangles;
 pub mod view;
 
 use crate::math::Aabb;
@@ -32,7 +37,7 @@ use bytemuck::{Pod, Zeroable};
 /// `b"HOST"` read as a little-endian u32.
 pub const MAGIC: u32 = u32::from_le_bytes(*b"HOST");
 /// Bumped on any change of the byte layout; part of the compatibility UUID.
-pub const LAYOUT_VERSION: u32 = 3;
+pub const LAYOUT_VERSION: u32 = 4;
 pub const SECTION_ALIGN: u64 = 64;
 pub const HEADER_SIZE: u64 = 256;
 /// Branching factor of the stored tree.
@@ -126,10 +131,48 @@ pub struct Header {
     /// Capacity of the primitive sections, in primitives.
     pub prim_capacity: u32,
     pub sah_cost: f32,
-    pub reserved: [u32; 31],
+    /// How triangles are stored: [`TRIANGLES_DIRECT`] or [`TRIANGLES_INDEXED`] (0 for other
+    /// primitive kinds).
+    pub triangle_format: u32,
+    /// Indexed triangles: where their shared vertices start, and how many there are.
+    pub vertices_offset: u64,
+    pub vertex_count: u32,
+    pub reserved: [u32; 27],
 }
 
 const _: () = assert!(std::mem::size_of::<Header>() as u64 == HEADER_SIZE);
+
+/// [`Header::triangle_format`]: each stored triangle holds its three vertices (36 bytes).
+pub const TRIANGLES_DIRECT: u32 = 0;
+/// [`Header::triangle_format`]: each stored triangle is a [`TriRecord`] into the shared
+/// vertices (8 bytes, plus about 12 bytes per distinct vertex on a mesh).
+pub const TRIANGLES_INDEXED: u32 = 1;
+
+/// An indexed triangle: its vertices are `vertices[a]`, `vertices[a + db]` and
+/// `vertices[a + dc]`, in index order. A triangle's vertices lie close together because they
+/// are numbered in order of first use in leaf order (see `layout::indexed`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+#[repr(C)]
+pub struct TriRecord {
+    pub a: u32,
+    pub db: i16,
+    pub dc: i16,
+}
+
+const _: () = assert!(std::mem::size_of::<TriRecord>() == 8);
+
+impl TriRecord {
+    /// The three vertex numbers (they may be out of range in unchecked bytes).
+    #[inline(always)]
+    pub fn vertices(&self) -> [usize; 3] {
+        let a = self.a as usize;
+        [
+            a,
+            a.wrapping_add_signed(self.db as isize),
+            a.wrapping_add_signed(self.dc as isize),
+        ]
+    }
+}
 
 /// Per-geometry record: what the ray query needs (first primitive, opacity) and what update
 /// checks against (§update rules: counts, formats, transform presence, flags).

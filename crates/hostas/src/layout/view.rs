@@ -5,9 +5,11 @@
 //! whatever the bytes are (memory the application scribbled on, or a structure that was
 //! created but never built).
 
+use super::triangles::{Indexed, Triangles};
 use super::{
     EMPTY_CHILD, GeometryRecord, HEADER_SIZE, Header, InstanceRecord, LAYOUT_VERSION, LEAF_BIT,
-    MAGIC, MAX_DEPTH, MAX_LEAF_SIZE, Node, PrimKind,
+    MAGIC, MAX_DEPTH, MAX_LEAF_SIZE, Node, PrimKind, TRIANGLES_DIRECT, TRIANGLES_INDEXED,
+    TriRecord,
 };
 
 #[derive(Clone, Copy, Debug)]
@@ -16,7 +18,7 @@ pub struct View<'a> {
     pub prim_kind: PrimKind,
     pub geometries: &'a [GeometryRecord],
     pub nodes: &'a [Node],
-    pub triangles: &'a [[f32; 9]],
+    pub triangles: Triangles<'a>,
     pub aabbs: &'a [[f32; 6]],
     pub instances: &'a [InstanceRecord],
     pub prim_ids: &'a [u32],
@@ -128,13 +130,40 @@ impl<'a> View<'a> {
         )?;
         let nodes: &[Node] = section(bytes, h.nodes_offset, h.node_count as u64, "node")?;
         let stored = h.stored_count as u64;
-        let (mut triangles, mut aabbs, mut instances): (
-            &[[f32; 9]],
-            &[[f32; 6]],
-            &[InstanceRecord],
-        ) = (&[], &[], &[]);
+        let indexed = h.triangle_format == TRIANGLES_INDEXED;
+        if h.triangle_format != TRIANGLES_DIRECT && !indexed
+            || indexed && prim_kind != PrimKind::Triangles
+        {
+            return Err(format!(
+                "triangle format {} in a structure of {prim_kind:?}",
+                h.triangle_format
+            ));
+        }
+        // An update rewrites each triangle's own vertices in place, which shared vertices
+        // do not allow: the builder never indexes a structure that allows update.
+        let allow_update = ash::vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE.as_raw();
+        if indexed && h.build_flags & allow_update != 0 {
+            return Err("indexed triangles in a structure that allows update".into());
+        }
+        if !indexed && (h.vertex_count != 0 || h.vertices_offset != 0) {
+            return Err("shared vertices without indexed triangles".into());
+        }
+        let (mut triangles, mut aabbs, mut instances): (Triangles, &[[f32; 6]], &[InstanceRecord]) =
+            (Triangles::default(), &[], &[]);
+        let mut prims_size = prim_kind.prim_size();
+        let mut vertices_end = None;
         match prim_kind {
-            PrimKind::Triangles => triangles = section(bytes, h.prims_offset, stored, "triangle")?,
+            PrimKind::Triangles if indexed => {
+                let records: &[TriRecord] = section(bytes, h.prims_offset, stored, "triangle")?;
+                let count = h.vertex_count as u64;
+                let vertices = section(bytes, h.vertices_offset, count, "vertex")?;
+                triangles = Triangles::Indexed(Indexed { records, vertices });
+                prims_size = std::mem::size_of::<TriRecord>() as u64;
+                vertices_end = Some((h.vertices_offset, h.vertices_offset + 12 * count));
+            }
+            PrimKind::Triangles => {
+                triangles = Triangles::Direct(section(bytes, h.prims_offset, stored, "triangle")?)
+            }
             PrimKind::Aabbs => aabbs = section(bytes, h.prims_offset, stored, "AABB")?,
             PrimKind::Instances => instances = section(bytes, h.prims_offset, stored, "instance")?,
             PrimKind::None => {
@@ -144,28 +173,31 @@ impl<'a> View<'a> {
             }
         }
         let prim_ids: &[u32] = section(bytes, h.prim_ids_offset, stored, "primitive id")?;
-        // Everything a reader touches lies inside the used size, which is all a compacted
-        // copy keeps.
-        let ends = [
-            h.geometries_offset + super::GEOMETRY_RECORD_SIZE * h.geometry_count as u64,
-            h.prims_offset + prim_kind.prim_size() * stored,
-            h.prim_ids_offset + 4 * stored,
-            h.nodes_offset + super::NODE_SIZE * h.node_count as u64,
+        // Sections follow the header and each other, in the encoder's order, without overlap
+        // (a write into one, as deserialization rewrites instance references, cannot reach
+        // another), and everything a reader touches lies inside the used size, which is all
+        // a compacted copy keeps.
+        let mut sections = vec![
+            (
+                h.geometries_offset,
+                h.geometries_offset + super::GEOMETRY_RECORD_SIZE * h.geometry_count as u64,
+            ),
+            (h.prims_offset, h.prims_offset + prims_size * stored),
         ];
-        if ends.iter().any(|&e| e > h.used_size) {
+        sections.extend(vertices_end);
+        sections.extend([
+            (h.prim_ids_offset, h.prim_ids_offset + 4 * stored),
+            (
+                h.nodes_offset,
+                h.nodes_offset + super::NODE_SIZE * h.node_count as u64,
+            ),
+        ]);
+        if sections.iter().any(|&(_, e)| e > h.used_size) {
             return Err("a section ends past the used size".into());
         }
-        // Sections follow the header and each other, in the encoder's order, without overlap:
-        // a write into one (deserialization rewrites instance references) cannot reach another.
-        let starts = [
-            h.geometries_offset,
-            h.prims_offset,
-            h.prim_ids_offset,
-            h.nodes_offset,
-        ];
         let mut prev_end = HEADER_SIZE;
-        for (s, e) in starts.iter().zip(ends) {
-            if *s < prev_end || s % super::SECTION_ALIGN != 0 {
+        for (s, e) in sections {
+            if s < prev_end || s % super::SECTION_ALIGN != 0 {
                 return Err(format!(
                     "section at {s} overlaps the previous one or is misaligned"
                 ));
@@ -228,6 +260,18 @@ impl<'a> View<'a> {
         if let Some(bad) = prim_ids.iter().find(|&&id| id >= h.primitive_count) {
             return Err(format!("primitive id {bad} out of range"));
         }
+        if let Triangles::Indexed(t) = self.triangles {
+            let count = t.vertices.len();
+            if let Some(i) = t
+                .records
+                .iter()
+                .position(|r| r.vertices().iter().any(|&v| v >= count))
+            {
+                return Err(format!(
+                    "indexed triangle {i} refers to a vertex past the {count} stored"
+                ));
+            }
+        }
         if (stored > 0) != (h.node_count > 0) {
             return Err("primitives without nodes or nodes without primitives".into());
         }
@@ -285,9 +329,11 @@ impl<'a> View<'a> {
 #[derive(Clone, Debug)]
 pub struct Parts {
     prim_kind: PrimKind,
+    indexed: bool,
     geometries: std::ops::Range<usize>,
     nodes: std::ops::Range<usize>,
     prims: std::ops::Range<usize>,
+    vertices: std::ops::Range<usize>,
     prim_ids: std::ops::Range<usize>,
 }
 
@@ -295,20 +341,29 @@ impl<'a> View<'a> {
     /// The section ranges of this view, for [`View::from_parts`].
     pub fn parts(&self, base: &[u8]) -> Parts {
         let range = |s: &[u8]| {
+            if s.is_empty() {
+                return 0..0;
+            }
             let start = s.as_ptr() as usize - base.as_ptr() as usize;
             start..start + s.len()
         };
-        let prims: &[u8] = match self.prim_kind {
-            PrimKind::Triangles => bytemuck::cast_slice(self.triangles),
-            PrimKind::Aabbs => bytemuck::cast_slice(self.aabbs),
-            PrimKind::Instances => bytemuck::cast_slice(self.instances),
-            PrimKind::None => &[],
+        let (prims, vertices): (&[u8], &[u8]) = match (self.prim_kind, self.triangles) {
+            (PrimKind::Triangles, Triangles::Direct(t)) => (bytemuck::cast_slice(t), &[]),
+            (PrimKind::Triangles, Triangles::Indexed(t)) => (
+                bytemuck::cast_slice(t.records),
+                bytemuck::cast_slice(t.vertices),
+            ),
+            (PrimKind::Aabbs, _) => (bytemuck::cast_slice(self.aabbs), &[]),
+            (PrimKind::Instances, _) => (bytemuck::cast_slice(self.instances), &[]),
+            (PrimKind::None, _) => (&[], &[]),
         };
         Parts {
             prim_kind: self.prim_kind,
+            indexed: matches!(self.triangles, Triangles::Indexed(_)),
             geometries: range(bytemuck::cast_slice(self.geometries)),
             nodes: range(bytemuck::cast_slice(self.nodes)),
-            prims: if prims.is_empty() { 0..0 } else { range(prims) },
+            prims: range(prims),
+            vertices: range(vertices),
             prim_ids: range(bytemuck::cast_slice(self.prim_ids)),
         }
     }
@@ -319,14 +374,19 @@ impl<'a> View<'a> {
     pub fn from_parts(bytes: &'a [u8], p: &Parts) -> Option<View<'a>> {
         let header: &Header = bytemuck::try_from_bytes(bytes.get(..HEADER_SIZE as usize)?).ok()?;
         let cast = |r: &std::ops::Range<usize>| bytes.get(r.clone());
-        let (mut triangles, mut aabbs, mut instances): (
-            &[[f32; 9]],
-            &[[f32; 6]],
-            &[InstanceRecord],
-        ) = (&[], &[], &[]);
+        let (mut triangles, mut aabbs, mut instances): (Triangles, &[[f32; 6]], &[InstanceRecord]) =
+            (Triangles::default(), &[], &[]);
         let prims = cast(&p.prims)?;
         match p.prim_kind {
-            PrimKind::Triangles => triangles = bytemuck::try_cast_slice(prims).ok()?,
+            PrimKind::Triangles if p.indexed => {
+                triangles = Triangles::Indexed(Indexed {
+                    records: bytemuck::try_cast_slice(prims).ok()?,
+                    vertices: bytemuck::try_cast_slice(cast(&p.vertices)?).ok()?,
+                })
+            }
+            PrimKind::Triangles => {
+                triangles = Triangles::Direct(bytemuck::try_cast_slice(prims).ok()?)
+            }
             PrimKind::Aabbs => aabbs = bytemuck::try_cast_slice(prims).ok()?,
             PrimKind::Instances => instances = bytemuck::try_cast_slice(prims).ok()?,
             PrimKind::None => {}

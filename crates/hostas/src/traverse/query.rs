@@ -10,6 +10,7 @@ use super::scene::Scene;
 use super::triangle::ShearedRay;
 use super::{Ray, RayFlags};
 use crate::error::{Error, Location, Result};
+use crate::layout::triangles::TriangleSource;
 use crate::layout::view::View;
 use crate::layout::{
     HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind,
@@ -325,7 +326,7 @@ pub(super) fn descend(
     stack: &mut [Entry],
     sp: &mut usize,
     nodes: &[Node],
-    triangles: &[[f32; 9]],
+    triangles: impl TriangleSource,
     index: u32,
     ray: &BoxRay,
     t_min: f32,
@@ -358,13 +359,7 @@ pub(super) fn descend(
                 }
             }
         } else {
-            let first = (e.child & !LEAF_BIT) as usize;
-            if let Some(t) = triangles.get(first) {
-                crate::math::prefetch(t);
-            }
-            if let Some(t) = triangles.get(first + (e.count as usize).saturating_sub(1)) {
-                crate::math::prefetch(t);
-            }
+            triangles.prefetch((e.child & !LEAF_BIT) as usize, e.count as usize);
         }
     };
     let start = *sp;
@@ -797,7 +792,7 @@ fn test_triangle(
     slot: u32,
 ) -> Option<Intersection> {
     let tri = view.triangles.get(slot as usize)?;
-    let h = sheared.intersect(tri)?;
+    let h = sheared.intersect(&tri)?;
     if !(h.t > ray.t_min && h.t < t_max) {
         return None;
     }

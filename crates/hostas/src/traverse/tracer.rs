@@ -12,8 +12,9 @@ use super::scene::{Hit, HitKind, Scene};
 use super::triangle::permutation;
 use super::{Ray, RayFlags};
 use crate::error::Result;
+use crate::layout::triangles::{LeafBuf, TriangleSource, Triangles};
 use crate::layout::view::View;
-use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind};
+use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, MAX_LEAF_SIZE, PrimKind};
 use crate::math::Affine;
 use ash::vk;
 
@@ -28,6 +29,8 @@ pub struct Tracer<'s> {
     /// The bottom-level view used last (consecutive instances often share one).
     cached: Option<(u32, View<'s>)>,
     stack: Vec<Entry>,
+    /// A leaf's indexed triangles, gathered for the tests.
+    leaf: Box<LeafBuf>,
     /// The top level's only instance, when it is the identity: rays go straight to its
     /// bottom level, resolved once here.
     direct: Option<Direct<'s>>,
@@ -84,6 +87,9 @@ struct Best {
     front_face: bool,
 }
 
+/// What a top level's leaves hold instead of triangles (nothing to prefetch).
+const NO_TRIANGLES: &[[f32; 9]] = &[];
+
 /// Room for a top-level and a bottom-level traversal on top of it.
 const TRACER_STACK: usize = 2 * STACK_CAPACITY;
 
@@ -97,6 +103,7 @@ impl<'s> Tracer<'s> {
             tlas,
             cached: None,
             stack,
+            leaf: Box::new([[0.0; 9]; MAX_LEAF_SIZE]),
             direct: tlas.as_ref().and_then(|t| Direct::new(scene, t)),
         }
     }
@@ -142,7 +149,16 @@ impl<'s> Tracer<'s> {
                     slot: 0,
                     blas: d.blas,
                 };
-                walk_blas(&mut self.stack, 0, &at, &boxes, ray, &mut best, first_hit);
+                walk_blas(
+                    &mut self.stack,
+                    &mut self.leaf,
+                    0,
+                    &at,
+                    &boxes,
+                    ray,
+                    &mut best,
+                    first_hit,
+                );
             }
             return Ok(hit(&best, d.inst, Some(&d.view)));
         }
@@ -159,6 +175,7 @@ impl<'s> Tracer<'s> {
         };
         // Disjoint borrows of the tracer's parts (the stack is borrowed for the whole trace).
         let stack = &mut self.stack[..];
+        let leaf = &mut *self.leaf;
         let scene = self.scene;
         let cached = &mut self.cached;
         let mut sp = 0;
@@ -173,7 +190,7 @@ impl<'s> Tracer<'s> {
                     stack,
                     &mut sp,
                     tlas.nodes,
-                    &[],
+                    NO_TRIANGLES,
                     cur.child,
                     &world.boxes,
                     ray.t_min,
@@ -186,7 +203,8 @@ impl<'s> Tracer<'s> {
                 let first = cur.child & !LEAF_BIT;
                 for slot in first..first + cur.count {
                     let found = enter(
-                        scene, cached, &tlas, &mut world, slot, stack, sp, &mut best, first_hit,
+                        scene, cached, &tlas, &mut world, slot, stack, leaf, sp, &mut best,
+                        first_hit,
                     );
                     if found && first_hit {
                         break 'top;
@@ -250,6 +268,7 @@ fn enter<'s>(
     world: &mut World,
     slot: u32,
     stack: &mut [Entry],
+    leaf: &mut LeafBuf,
     sp: usize,
     best: &mut Best,
     first_hit: bool,
@@ -288,15 +307,17 @@ fn enter<'s>(
         slot,
         blas: bi,
     };
-    walk_blas(stack, sp, &at, local, ray, best, first_hit)
+    walk_blas(stack, leaf, sp, &at, local, ray, best, first_hit)
 }
 
 /// [`trace_blas`] for the axis permutation of the ray (`local`: in the instance's space).
 /// The root's children are tested first: a ray that reaches none of them (most rays that miss
 /// the structure) is done before it is prepared for triangles and the loop is entered.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn walk_blas(
     stack: &mut [Entry],
+    leaf: &mut LeafBuf,
     base: usize,
     at: &BlasAt,
     local: &BoxRay,
@@ -319,13 +340,37 @@ fn walk_blas(
         return false;
     };
     let walk = Walk { base, sp, cur };
+    match view.triangles {
+        Triangles::Direct(t) => {
+            walk_permuted(stack, leaf, walk, at, t, local, ray, best, first_hit)
+        }
+        Triangles::Indexed(t) => {
+            walk_permuted(stack, leaf, walk, at, t, local, ray, best, first_hit)
+        }
+    }
+}
+
+/// [`trace_blas`] for the axis permutation of the ray and the layout of the triangles.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn walk_permuted<T: TriangleSource>(
+    stack: &mut [Entry],
+    leaf: &mut LeafBuf,
+    walk: Walk,
+    at: &BlasAt,
+    tris: T,
+    local: &BoxRay,
+    ray: &Ray,
+    best: &mut Best,
+    first_hit: bool,
+) -> bool {
     match permutation(local.direction) {
-        0 => trace_blas::<0>(stack, walk, at, local, ray, best, first_hit),
-        1 => trace_blas::<1>(stack, walk, at, local, ray, best, first_hit),
-        2 => trace_blas::<2>(stack, walk, at, local, ray, best, first_hit),
-        3 => trace_blas::<3>(stack, walk, at, local, ray, best, first_hit),
-        4 => trace_blas::<4>(stack, walk, at, local, ray, best, first_hit),
-        _ => trace_blas::<5>(stack, walk, at, local, ray, best, first_hit),
+        0 => trace_blas::<0, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+        1 => trace_blas::<1, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+        2 => trace_blas::<2, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+        3 => trace_blas::<3, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+        4 => trace_blas::<4, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+        _ => trace_blas::<5, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
     }
 }
 
@@ -364,11 +409,14 @@ struct BlasAt<'a, 's> {
 /// of the ray (`permutation(boxes.direction) == P`), so that preparing the ray for the
 /// triangle test and the test itself index nothing at run time. Not inlined: the
 /// bottom-level loop is the hot one and gets the registers to itself.
+#[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn trace_blas<const P: usize>(
+fn trace_blas<const P: usize, T: TriangleSource>(
     stack: &mut [Entry],
+    buf: &mut LeafBuf,
     walk: Walk,
     at: &BlasAt,
+    tris: T,
     boxes: &BoxRay,
     ray: &Ray,
     best: &mut Best,
@@ -406,14 +454,7 @@ fn trace_blas<const P: usize>(
     loop {
         if cur.child & LEAF_BIT == 0 {
             if let Some(next) = descend(
-                stack,
-                &mut sp,
-                view.nodes,
-                view.triangles,
-                cur.child,
-                boxes,
-                ray.t_min,
-                best.t,
+                stack, &mut sp, view.nodes, tris, cur.child, boxes, ray.t_min, best.t,
             ) {
                 cur = next;
                 continue;
@@ -429,7 +470,8 @@ fn trace_blas<const P: usize>(
         let first = cur.child & !LEAF_BIT;
         let range = first as usize..first as usize + cur.count as usize;
         if view.prim_kind == PrimKind::Triangles {
-            for (p, tri) in (first..).zip(view.triangles.get(range).unwrap_or_default()) {
+            let leaf = tris.leaf(first as usize, cur.count as usize, buf);
+            for (p, tri) in (first..).zip(leaf) {
                 let Some(h) = sheared.intersect_axes::<P>(tri) else {
                     continue;
                 };

@@ -121,11 +121,17 @@ impl ShearedRay {
     /// time (the batch tracer instantiates its whole bottom-level loop per permutation).
     #[inline(always)]
     pub fn intersect_axes<const P: usize>(&self, v: &[f32; 9]) -> Option<TriangleHit> {
+        let v: &[[f32; 3]; 3] = bytemuck::cast_ref(v);
+        self.intersect_corners::<P>([&v[0], &v[1], &v[2]])
+    }
+
+    /// [`ShearedRay::intersect_axes`] for a triangle given as its three vertices in index
+    /// order, wherever they are stored.
+    #[inline(always)]
+    pub fn intersect_corners<const P: usize>(&self, v: [&[f32; 3]; 3]) -> Option<TriangleHit> {
         let (kx, ky, kz) = AXES[P];
         let o = self.origin;
-        let a = [v[0] - o[0], v[1] - o[1], v[2] - o[2]];
-        let b = [v[3] - o[0], v[4] - o[1], v[5] - o[2]];
-        let c = [v[6] - o[0], v[7] - o[1], v[8] - o[2]];
+        let [a, b, c] = v.map(|p| [p[0] - o[0], p[1] - o[1], p[2] - o[2]]);
         let s = Sheared {
             x: [
                 a[kx] - self.sx * a[kz],

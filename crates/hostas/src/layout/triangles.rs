@@ -1,0 +1,153 @@
+//! Reading stored triangles in either layout: direct (three vertices per triangle) or
+//! indexed ([`TriRecord`]s into shared vertices; written by [`super::indexed`]).
+//!
+//! Both give the same three vertices, in index order, for a slot, so every test computes the
+//! same bits whichever layout a structure has. Traversal's hot loop is instantiated per
+//! layout through [`TriangleSource`]; other readers go through [`Triangles`].
+
+use super::TriRecord;
+
+/// The vertices of indexed triangles, [`View`](super::view::View)-checked: every record's
+/// three vertex numbers are in range.
+#[derive(Clone, Copy, Debug)]
+pub struct Indexed<'a> {
+    pub records: &'a [TriRecord],
+    pub vertices: &'a [[f32; 3]],
+}
+
+/// The stored triangles of a structure, in leaf order.
+#[derive(Clone, Copy, Debug)]
+pub enum Triangles<'a> {
+    Direct(&'a [[f32; 9]]),
+    Indexed(Indexed<'a>),
+}
+
+impl Default for Triangles<'_> {
+    fn default() -> Self {
+        Triangles::Direct(&[])
+    }
+}
+
+/// Room for one leaf's triangles.
+pub type LeafBuf = [[f32; 9]; super::MAX_LEAF_SIZE];
+
+/// Stored triangles as the traversal reads them.
+pub trait TriangleSource: Copy {
+    /// The vertices of stored triangle `slot`, in index order (`None` out of range).
+    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]>;
+    /// The `count` triangles from `first` as nine floats each, in index order: in place, or
+    /// gathered into `buf` (at most [`MAX_LEAF_SIZE`](super::MAX_LEAF_SIZE), a leaf).
+    /// Empty when out of range.
+    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]];
+    /// Requests the first cache lines of the `count` triangles from `first`.
+    fn prefetch(&self, first: usize, count: usize);
+    /// Stored triangles.
+    fn len(&self) -> usize;
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+impl TriangleSource for &[[f32; 9]] {
+    #[inline(always)]
+    fn leaf<'b>(&'b self, first: usize, count: usize, _: &'b mut LeafBuf) -> &'b [[f32; 9]] {
+        self.get(first..first + count).unwrap_or_default()
+    }
+    #[inline(always)]
+    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
+        let v: &[[f32; 3]; 3] = bytemuck::cast_ref(self.get(slot)?);
+        Some([&v[0], &v[1], &v[2]])
+    }
+    #[inline(always)]
+    fn prefetch(&self, first: usize, count: usize) {
+        // The first and last triangle: a leaf's 36-byte triangles span at most a few lines.
+        if let Some(t) = self.get(first) {
+            crate::math::prefetch(t);
+        }
+        if let Some(t) = self.get(first + count.saturating_sub(1)) {
+            crate::math::prefetch(t);
+        }
+    }
+    #[inline(always)]
+    fn len(&self) -> usize {
+        <[[f32; 9]]>::len(self)
+    }
+}
+
+impl TriangleSource for Indexed<'_> {
+    /// Gathered first, so that the triangle tests run over nine floats in a row as they do
+    /// for direct triangles (fetching each vertex inside the test loop cost far more there:
+    /// more live registers, spills and shuffles).
+    #[inline(always)]
+    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]] {
+        let Some(records) = self.records.get(first..first + count) else {
+            return &[];
+        };
+        let v = self.vertices;
+        for (out, r) in buf.iter_mut().zip(records) {
+            let [a, b, c] = r.vertices();
+            let (Some(a), Some(b), Some(c)) = (v.get(a), v.get(b), v.get(c)) else {
+                return &[];
+            };
+            *out = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+        }
+        &buf[..records.len().min(buf.len())]
+    }
+    #[inline(always)]
+    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
+        let [a, b, c] = self.records.get(slot)?.vertices();
+        let v = self.vertices;
+        Some([v.get(a)?, v.get(b)?, v.get(c)?])
+    }
+    #[inline(always)]
+    fn prefetch(&self, first: usize, _count: usize) {
+        // A leaf's records (at most 15 of 8 bytes) and, where the first one is already in the
+        // caches, nothing more: the vertices' addresses are only known once it is read.
+        if let Some(r) = self.records.get(first) {
+            crate::math::prefetch(r);
+        }
+    }
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.records.len()
+    }
+}
+
+impl TriangleSource for Triangles<'_> {
+    #[inline]
+    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]] {
+        match self {
+            Triangles::Direct(t) => t.leaf(first, count, buf),
+            Triangles::Indexed(t) => t.leaf(first, count, buf),
+        }
+    }
+    #[inline]
+    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
+        match self {
+            Triangles::Direct(t) => t.corners(slot),
+            Triangles::Indexed(t) => t.corners(slot),
+        }
+    }
+    #[inline]
+    fn prefetch(&self, first: usize, count: usize) {
+        match self {
+            Triangles::Direct(t) => t.prefetch(first, count),
+            Triangles::Indexed(t) => t.prefetch(first, count),
+        }
+    }
+    #[inline]
+    fn len(&self) -> usize {
+        match self {
+            Triangles::Direct(t) => t.len(),
+            Triangles::Indexed(t) => t.len(),
+        }
+    }
+}
+
+impl Triangles<'_> {
+    /// The vertices of stored triangle `slot` as nine floats, in index order.
+    pub fn get(&self, slot: usize) -> Option<[f32; 9]> {
+        let [a, b, c] = self.corners(slot)?;
+        Some([a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]])
+    }
+}
