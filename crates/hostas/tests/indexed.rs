@@ -201,6 +201,24 @@ fn compacted_and_deserialized_indexed_structures_trace_the_same() {
     let b = device.deserialize(&bytes).unwrap();
     assert_trace_alike(&device, a, b);
     assert_eq!(device.serialize(b).unwrap(), bytes);
+    // Compacted into exactly the size the query gives: the used size, vertices included.
+    let size = device
+        .acceleration_structure_property(
+            a,
+            vk::QueryType::ACCELERATION_STRUCTURE_COMPACTED_SIZE_KHR,
+        )
+        .unwrap();
+    assert_eq!(size, device.statistics(a).unwrap().used_bytes);
+    let c = device
+        .create_acceleration_structure(&hostas::AccelerationStructureCreateInfo::new(
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            size,
+        ))
+        .unwrap();
+    device
+        .copy_acceleration_structure(a, c, vk::CopyAccelerationStructureModeKHR::COMPACT)
+        .unwrap();
+    assert_trace_alike(&device, a, c);
 }
 
 #[test]
