@@ -250,6 +250,7 @@ fn build_info_trace_round_trip() {
         "ALLOW_COMPACTION",
         "SAH cost",
         "depth",
+        "triangles            indexed, ",
         "top-level, instances",
         "0x1, 0x2",
     ] {
@@ -266,6 +267,10 @@ fn build_info_trace_round_trip() {
     assert_eq!(s[2]["header"]["handles"], serde_json::json!([1, 2]));
     assert_eq!(s[2]["statistics"]["type"], "top-level");
     assert!(s[0]["statistics"]["sah_cost"].as_f64().unwrap() > 0.0);
+    // A closed mesh built for fast trace shares its vertices: well under three per triangle.
+    assert_eq!(s[0]["statistics"]["triangles"], "indexed");
+    let shared = s[0]["statistics"]["shared_vertices"].as_u64().unwrap();
+    assert!(shared > 0 && shared < 320, "{shared} shared vertices");
 
     // Trace the same rays through the build file and through the meshes.
     let rays = test_rays();

@@ -83,6 +83,11 @@ pub struct Stats {
     pub leaves: u32,
     pub depth: u32,
     pub sah_cost: f32,
+    /// How triangles are stored: "indexed" (records into shared vertices) or "direct" (three
+    /// vertices each); empty for other primitives.
+    pub triangles: &'static str,
+    /// Vertices the indexed triangles share (0 when direct).
+    pub shared_vertices: u32,
     pub bytes: u64,
     pub bytes_per_primitive: f64,
 }
@@ -146,6 +151,12 @@ pub fn describe(device: &Device, role: String, name: String, data: &[u8]) -> Res
                     leaves: s.leaf_count,
                     depth: s.depth,
                     sah_cost: s.sah_cost,
+                    triangles: match (s.prim_kind, s.indexed_triangles) {
+                        (hostas::layout::PrimKind::Triangles, true) => "indexed",
+                        (hostas::layout::PrimKind::Triangles, false) => "direct",
+                        _ => "",
+                    },
+                    shared_vertices: s.vertex_count,
                     bytes: s.used_bytes,
                     bytes_per_primitive: s.bytes_per_primitive(),
                 });
@@ -361,6 +372,19 @@ fn text(info: &FileInfo) -> String {
             );
             row(&mut s, "depth", t.depth.to_string());
             row(&mut s, "SAH cost", format!("{:.2}", t.sah_cost));
+            match t.triangles {
+                "indexed" => row(
+                    &mut s,
+                    "triangles",
+                    format!(
+                        "indexed, {} shared vertices ({:.2} per triangle)",
+                        thousands(t.shared_vertices as u64),
+                        t.shared_vertices as f64 / t.active_primitives.max(1) as f64
+                    ),
+                ),
+                "direct" => row(&mut s, "triangles", "direct, three vertices each".into()),
+                _ => {}
+            }
             row(
                 &mut s,
                 "size",
