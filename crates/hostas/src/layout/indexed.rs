@@ -131,8 +131,7 @@ pub fn share_vertices(
 
 /// Numbers the vertices of `triangles` (`keys` theirs) from `count` on, writing their records
 /// and new vertices (three floats each); returns the new count, or `None` when `vertices` has
-/// no room for them. Kept out of line: inlined, its loop runs short of registers.
-#[inline(never)]
+/// no room for them.
 fn share_chunk(
     map: &mut [u32],
     vertices: &mut [f32],
@@ -169,27 +168,7 @@ fn share_chunk(
                 }
             }
             // A triangle that shares nothing, or the last room for vertices.
-            _ => {
-                let shares = key.iter().all(|&k| (k as usize) < map.len());
-                for k in 0..3 {
-                    let key = key[k] as usize;
-                    let known = map.get(key).copied().filter(|_| shares);
-                    number[k] = match known.filter(|&n| count.wrapping_sub(n) <= WINDOW) {
-                        Some(n) => n,
-                        None => {
-                            let at = 3 * count as usize;
-                            vertices
-                                .get_mut(at..at + 3)?
-                                .copy_from_slice(&tri[3 * k..3 * k + 3]);
-                            if let Some(e) = map.get_mut(key).filter(|_| shares) {
-                                *e = count;
-                            }
-                            count += 1;
-                            count - 1
-                        }
-                    };
-                }
-            }
+            _ => (number, count) = number_one_by_one(map, vertices, count, tri, key)?,
         }
         let delta = |n: u32| (n as i64 - number[0] as i64) as i16;
         *record = TriRecord {
@@ -199,6 +178,39 @@ fn share_chunk(
         };
     }
     Some(count)
+}
+
+/// [`share_chunk`]'s numbering of one triangle, a corner at a time; returns its numbers and
+/// the new count (out of the loop, which then keeps more in registers).
+#[cold]
+fn number_one_by_one(
+    map: &mut [u32],
+    vertices: &mut [f32],
+    mut count: u32,
+    tri: &[f32; 9],
+    key: &[u32; 3],
+) -> Option<([u32; 3], u32)> {
+    let shares = key.iter().all(|&k| (k as usize) < map.len());
+    let mut number = [0u32; 3];
+    for k in 0..3 {
+        let key = key[k] as usize;
+        let known = map.get(key).copied().filter(|_| shares);
+        number[k] = match known.filter(|&n| count.wrapping_sub(n) <= WINDOW) {
+            Some(n) => n,
+            None => {
+                let at = 3 * count as usize;
+                vertices
+                    .get_mut(at..at + 3)?
+                    .copy_from_slice(&tri[3 * k..3 * k + 3]);
+                if let Some(e) = map.get_mut(key).filter(|_| shares) {
+                    *e = count;
+                }
+                count += 1;
+                count - 1
+            }
+        };
+    }
+    Some((number, count))
 }
 
 fn internal(what: &str) -> Error {
