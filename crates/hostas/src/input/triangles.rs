@@ -55,6 +55,13 @@ impl IndexedVertices<'_> {
                 bytemuck::cast_slice(&v.index_data[..v.index_data.len() / size * size]);
             // Vulkan's `firstVertex` is a `u32`.
             let first = v.first_vertex.min(u32::MAX as u64) as u32;
+            // Read at random (mostly from memory): all are asked for first, so that their
+            // misses overlap.
+            for &id in ids {
+                if let Some(t) = triangles.get(id as usize) {
+                    crate::math::prefetch(t);
+                }
+            }
             for (&id, out) in ids.iter().zip(out) {
                 *out = triangles.get(id as usize).map_or([u32::MAX; 3], |&t| {
                     I::three(t).map(|i| i.saturating_add(first))
