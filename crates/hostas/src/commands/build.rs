@@ -1247,19 +1247,24 @@ fn share_vertices(
     ) {
         return Ok(false);
     }
-    let single = match geometries[..] {
-        [(_, _, g)] => g,
-        _ => None,
-    };
-    let keys = |_slot: usize, id: u32| {
-        // One geometry (the common case) needs no lookup.
-        if let Some(g) = single {
-            return g.triangle(id);
-        }
+    if let [(_, _, Some(g))] = geometries[..] {
+        // One geometry (the common case) needs no lookup, and its vertex numbers are its
+        // keys: those past `maxVertex` are past `key_count`.
+        let keys = |ids: &[u32], out: &mut [[u32; 3]]| g.triangles(ids, out);
+        return layout::indexed::share_vertices(bytes, keys, key_count, scratch);
+    }
+    // Keys fit a `u32` (share_vertices checks `key_count`).
+    let key = |id: u32| {
         let at = geometries.partition_point(|g| g.0 <= id).checked_sub(1)?;
         let (first, base, g) = geometries[at];
         let v = g?.triangle(id - first)?;
-        Some(v.map(|v| base + v))
+        Some(v.map(|v| base as u32 + v))
+    };
+    let keys = |ids: &[u32], out: &mut [[u32; 3]]| {
+        for (&id, out) in ids.iter().zip(out) {
+            // Past `key_count`: shares nothing.
+            *out = key(id).unwrap_or([u32::MAX; 3]);
+        }
     };
     layout::indexed::share_vertices(bytes, keys, key_count, scratch)
 }

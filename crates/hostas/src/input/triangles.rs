@@ -37,25 +37,71 @@ pub struct IndexedVertices<'a> {
 impl IndexedVertices<'_> {
     /// The vertex numbers (`firstVertex` included, at most `maxVertex`) of triangle `i`;
     /// `None` where its indices are not in the buffer or exceed `maxVertex`.
-    #[inline(always)]
-    pub fn triangle(&self, i: u32) -> Option<[u64; 3]> {
-        let at = 3 * self.index_size * i as usize;
-        let v = if self.index_size == 4 {
-            let b: [u8; 12] = self.index_data.get(at..at + 12)?.try_into().ok()?;
-            let w: [u32; 3] = bytemuck::cast(b);
-            w.map(|x| u32::from_le(x) as u64)
+    pub fn triangle(&self, i: u32) -> Option<[u32; 3]> {
+        let mut v = [[0; 3]];
+        self.triangles(&[i], &mut v);
+        v[0].iter()
+            .all(|&n| n as u64 <= self.max_vertex)
+            .then_some(v[0])
+    }
+
+    /// The vertex numbers (`firstVertex` included) of the triangles `ids` into `out`, not
+    /// checked against `maxVertex`: `u32::MAX` (past any) where an index is not in the buffer
+    /// or the sum exceeds it. The index size is chosen once for them all.
+    pub fn triangles(&self, ids: &[u32], out: &mut [[u32; 3]]) {
+        fn each<I: Index>(v: &IndexedVertices, ids: &[u32], out: &mut [[u32; 3]]) {
+            let size = size_of::<I::Three>();
+            let triangles: &[I::Three] =
+                bytemuck::cast_slice(&v.index_data[..v.index_data.len() / size * size]);
+            // Vulkan's `firstVertex` is a `u32`.
+            let first = v.first_vertex.min(u32::MAX as u64) as u32;
+            // Read at random (mostly from memory): all are asked for first, so that their
+            // misses overlap.
+            for &id in ids {
+                if let Some(t) = triangles.get(id as usize) {
+                    crate::math::prefetch(t);
+                }
+            }
+            for (&id, out) in ids.iter().zip(out) {
+                *out = triangles.get(id as usize).map_or([u32::MAX; 3], |&t| {
+                    I::three(t).map(|i| i.saturating_add(first))
+                });
+            }
+        }
+        if self.index_size == 4 {
+            each::<u32>(self, ids, out)
         } else {
-            let b: [u8; 6] = self.index_data.get(at..at + 6)?.try_into().ok()?;
-            let w: [u16; 3] = bytemuck::cast(b);
-            w.map(|x| u16::from_le(x) as u64)
-        };
-        let v = v.map(|x| x + self.first_vertex);
-        (v[0].max(v[1]).max(v[2]) <= self.max_vertex).then_some(v)
+            each::<u16>(self, ids, out)
+        }
     }
 
     /// Vertex numbers are at most this.
     pub fn max_vertex(&self) -> u64 {
         self.max_vertex
+    }
+}
+
+/// An index buffer's element type.
+trait Index: Copy {
+    /// A triangle's three indices, as bytes.
+    type Three: bytemuck::Pod;
+    /// Three indices, little-endian.
+    fn three(b: Self::Three) -> [u32; 3];
+}
+
+impl Index for u32 {
+    type Three = [u8; 12];
+    #[inline(always)]
+    fn three(b: [u8; 12]) -> [u32; 3] {
+        bytemuck::cast::<_, [u32; 3]>(b).map(u32::from_le)
+    }
+}
+
+impl Index for u16 {
+    type Three = [u8; 6];
+    #[inline(always)]
+    fn three(b: [u8; 6]) -> [u32; 3] {
+        bytemuck::cast::<_, [u16; 3]>(b).map(|x| u16::from_le(x) as u32)
     }
 }
 

@@ -20,8 +20,8 @@ use crate::error::{Error, Result};
 /// for the two vertices a triangle may number after its first.
 pub const WINDOW: u32 = 32000;
 
-/// "Not numbered yet" in the vertex map.
-const NONE: u32 = u32::MAX;
+/// "Not numbered yet" in the vertex map: a number so far back that it is never in the window.
+const FAR: u32 = u32::MAX - WINDOW;
 
 /// Whether indexing `triangles` could pay when at most `vertices` distinct ones are stored
 /// (before the window's repeats): records and vertices must take less room than the direct
@@ -30,15 +30,18 @@ pub fn may_pay(vertices: u64, triangles: u64) -> bool {
     8 * triangles + 12 * vertices < 36 * triangles
 }
 
+/// Triangles whose keys are made at a time (their keys stay in the L1 cache).
+const CHUNK: usize = 256;
+
 /// Rewrites the direct triangles of the structure in `bytes` (header, ids and nodes written)
-/// as indexed ones when that is smaller. `keys(slot, id)` gives the vertex keys of stored
-/// triangle `slot` (primitive sequence number `id`), each below `key_count`, equal exactly
-/// where two vertices are the application's same vertex; `None` for a triangle that shares
-/// nothing. `scratch` holds the records and vertices while the triangles are read (36 bytes
-/// per stored triangle suffice). Returns whether the structure is now indexed.
+/// as indexed ones when that is smaller. `keys(ids, out)` writes the vertex keys of the
+/// triangles with primitive sequence numbers `ids`: below `key_count` and equal exactly where
+/// two vertices are the application's same vertex; a triangle with a key at or past it
+/// shares nothing. `scratch` holds the records and vertices while the triangles are read
+/// (36 bytes per stored triangle suffice). Returns whether the structure is now indexed.
 pub fn share_vertices(
     bytes: &mut [u8],
-    keys: impl Fn(usize, u32) -> Option<[u64; 3]>,
+    mut keys: impl FnMut(&[u32], &mut [[u32; 3]]),
     key_count: u64,
     scratch: &mut [u8],
 ) -> Result<bool> {
@@ -49,13 +52,13 @@ pub fn share_vertices(
     );
     let stored = header.stored_count as usize;
     // A vertex map much larger than the triangles (a few triangles indexing a large vertex
-    // buffer) costs more than it saves.
-    if stored == 0 || key_count > 8 * stored as u64 + 1024 {
+    // buffer) costs more than it saves; keys are `u32`s.
+    if stored == 0 || key_count > (8 * stored as u64 + 1024).min(u32::MAX as u64) {
         return Ok(false);
     }
     let tris_at = header.prims_offset as usize;
     let ids_at = header.prim_ids_offset as usize;
-    let triangles: &[[[f32; 3]; 3]] = cast(bytes.get(tris_at..tris_at + 36 * stored))?;
+    let triangles: &[[f32; 9]] = cast(bytes.get(tris_at..tris_at + 36 * stored))?;
     let ids: &[u32] = cast(bytes.get(ids_at..ids_at + 4 * stored))?;
 
     // Records first, then vertices, in scratch: at most as many bytes as the direct triangles.
@@ -65,40 +68,27 @@ pub fn share_vertices(
         .split_at_mut(8 * stored);
     let records: &mut [TriRecord] = cast_mut(Some(records))?;
     let room = vertices.len() / 12 * 12;
-    let vertices: &mut [[f32; 3]] = cast_mut(vertices.get_mut(..room))?;
-    let mut map = vec![NONE; key_count as usize];
+    let vertices: &mut [f32] = cast_mut(vertices.get_mut(..room))?;
+    // Count stays below FAR (at most three vertices per triangle), so `count - FAR` wraps to
+    // more than WINDOW: one unsigned compare tells a vertex numbered within the window.
+    if 3 * stored as u64 >= FAR as u64 {
+        return Ok(false);
+    }
+    let mut map = vec![FAR; key_count as usize];
     let mut count = 0u32;
-    for (slot, (tri, record)) in triangles.iter().zip(records.iter_mut()).enumerate() {
-        let key = keys(slot, ids[slot]);
-        let mut number = [0u32; 3];
-        for k in 0..3 {
-            let key = key.map(|key| key[k] as usize);
-            let known = key
-                .and_then(|i| map.get(i).copied())
-                .filter(|&n| n != NONE && count - n <= WINDOW);
-            number[k] = match known {
-                Some(n) => n,
-                None => {
-                    // Stored again (or for the first time): no room left means sharing does
-                    // not pay, and the direct triangles stay.
-                    let Some(v) = vertices.get_mut(count as usize) else {
-                        return Ok(false);
-                    };
-                    *v = tri[k];
-                    if let Some(e) = key.and_then(|i| map.get_mut(i)) {
-                        *e = count;
-                    }
-                    count += 1;
-                    count - 1
-                }
-            };
-        }
-        let delta = |n: u32| (n as i64 - number[0] as i64) as i16;
-        *record = TriRecord {
-            a: number[0],
-            db: delta(number[1]),
-            dc: delta(number[2]),
+    let mut chunk_keys = [[0u32; 3]; CHUNK];
+    for ((triangles, records), ids) in triangles
+        .chunks(CHUNK)
+        .zip(records.chunks_mut(CHUNK))
+        .zip(ids.chunks(CHUNK))
+    {
+        let chunk_keys = &mut chunk_keys[..ids.len()];
+        keys(ids, chunk_keys);
+        let Some(c) = share_chunk(&mut map, vertices, count, triangles, chunk_keys, records) else {
+            // No room left: sharing does not pay, and the direct triangles stay.
+            return Ok(false);
         };
+        count = c;
     }
     drop(map);
 
@@ -116,7 +106,7 @@ pub fn share_vertices(
     bytes.copy_within(nodes_at..nodes_at + node_bytes, new_nodes_at);
     let records: &[u8] = bytemuck::cast_slice(&records[..]);
     bytes[tris_at..tris_at + records.len()].copy_from_slice(records);
-    let vertices: &[u8] = bytemuck::cast_slice(&vertices[..vertex_count]);
+    let vertices: &[u8] = bytemuck::cast_slice(&vertices[..3 * vertex_count]);
     bytes[vertices_at..vertices_at + vertices.len()].copy_from_slice(vertices);
     // The alignment gaps, so the bytes do not depend on what the memory held.
     for (start, end) in [
@@ -137,6 +127,90 @@ pub fn share_vertices(
     };
     bytes[..HEADER_SIZE as usize].copy_from_slice(bytemuck::bytes_of(&header));
     Ok(true)
+}
+
+/// Numbers the vertices of `triangles` (`keys` theirs) from `count` on, writing their records
+/// and new vertices (three floats each); returns the new count, or `None` when `vertices` has
+/// no room for them.
+fn share_chunk(
+    map: &mut [u32],
+    vertices: &mut [f32],
+    mut count: u32,
+    triangles: &[[f32; 9]],
+    keys: &[[u32; 3]],
+    records: &mut [TriRecord],
+) -> Option<u32> {
+    for ((tri, key), record) in triangles.iter().zip(keys).zip(records) {
+        let mut number = [0u32; 3];
+        let at = 3 * count as usize;
+        let slots: Option<&mut [f32; 9]> =
+            vertices.get_mut(at..at + 9).and_then(|v| v.try_into().ok());
+        match slots {
+            Some(slots) if key.iter().all(|&k| (k as usize) < map.len()) => {
+                // Whether a vertex is new follows no pattern a branch predictor could
+                // learn, so it steers no branch: each corner is copied to the next slot
+                // (a shared one is overwritten by the next new one), and its number chosen
+                // by a mask (the compiler turns `if fresh` into a branch).
+                let mut slot = 0;
+                for k in 0..3 {
+                    let key = key[k] as usize;
+                    let last = map[key];
+                    let fresh = count.wrapping_sub(last) > WINDOW;
+                    let mask = (fresh as u32).wrapping_neg();
+                    number[k] = last ^ ((last ^ count) & mask);
+                    map[key] = number[k];
+                    // The first two corners as 16 bytes (the next slot's first float is
+                    // written again or unused).
+                    let floats = if k < 2 { 4 } else { 3 };
+                    slots[3 * slot..3 * slot + floats].copy_from_slice(&tri[3 * k..3 * k + floats]);
+                    slot += fresh as usize;
+                    count += fresh as u32;
+                }
+            }
+            // A triangle that shares nothing, or the last room for vertices.
+            _ => (number, count) = number_one_by_one(map, vertices, count, tri, key)?,
+        }
+        let delta = |n: u32| (n as i64 - number[0] as i64) as i16;
+        *record = TriRecord {
+            a: number[0],
+            db: delta(number[1]),
+            dc: delta(number[2]),
+        };
+    }
+    Some(count)
+}
+
+/// [`share_chunk`]'s numbering of one triangle, a corner at a time; returns its numbers and
+/// the new count (out of the loop, which then keeps more in registers).
+#[cold]
+fn number_one_by_one(
+    map: &mut [u32],
+    vertices: &mut [f32],
+    mut count: u32,
+    tri: &[f32; 9],
+    key: &[u32; 3],
+) -> Option<([u32; 3], u32)> {
+    let shares = key.iter().all(|&k| (k as usize) < map.len());
+    let mut number = [0u32; 3];
+    for k in 0..3 {
+        let key = key[k] as usize;
+        let known = map.get(key).copied().filter(|_| shares);
+        number[k] = match known.filter(|&n| count.wrapping_sub(n) <= WINDOW) {
+            Some(n) => n,
+            None => {
+                let at = 3 * count as usize;
+                vertices
+                    .get_mut(at..at + 3)?
+                    .copy_from_slice(&tri[3 * k..3 * k + 3]);
+                if let Some(e) = map.get_mut(key).filter(|_| shares) {
+                    *e = count;
+                }
+                count += 1;
+                count - 1
+            }
+        };
+    }
+    Some((number, count))
 }
 
 fn internal(what: &str) -> Error {
