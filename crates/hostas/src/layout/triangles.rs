@@ -3,7 +3,8 @@
 //!
 //! Both give the same three vertices, in index order, for a slot, so every test computes the
 //! same bits whichever layout a structure has. Traversal's hot loop is instantiated per
-//! layout through [`TriangleSource`]; other readers go through [`Triangles`].
+//! layout (reading direct triangles in place, gathering indexed ones with
+//! [`Indexed::leaf_rows`]); other readers go through [`Triangles`].
 
 use super::TriRecord;
 
@@ -28,17 +29,13 @@ impl Default for Triangles<'_> {
     }
 }
 
-/// Room for one leaf's triangles.
-pub type LeafBuf = [[f32; 9]; super::MAX_LEAF_SIZE];
+/// Room for one leaf's triangles gathered as rows (see [`Indexed::leaf_rows`]).
+pub type LeafRows = [[f32; 12]; super::MAX_LEAF_SIZE];
 
 /// Stored triangles as the traversal reads them.
 pub trait TriangleSource: Copy {
     /// The vertices of stored triangle `slot`, in index order (`None` out of range).
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]>;
-    /// The `count` triangles from `first` as nine floats each, in index order: in place, or
-    /// gathered into `buf` (at most [`MAX_LEAF_SIZE`](super::MAX_LEAF_SIZE), a leaf).
-    /// Empty when out of range.
-    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]];
     /// Requests the first cache lines of the `count` triangles from `first`.
     fn prefetch(&self, first: usize, count: usize);
     /// Stored triangles.
@@ -49,10 +46,6 @@ pub trait TriangleSource: Copy {
 }
 
 impl TriangleSource for &[[f32; 9]] {
-    #[inline(always)]
-    fn leaf<'b>(&'b self, first: usize, count: usize, _: &'b mut LeafBuf) -> &'b [[f32; 9]] {
-        self.get(first..first + count).unwrap_or_default()
-    }
     #[inline(always)]
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
         let v: &[[f32; 3]; 3] = bytemuck::cast_ref(self.get(slot)?);
@@ -74,12 +67,19 @@ impl TriangleSource for &[[f32; 9]] {
     }
 }
 
-impl TriangleSource for Indexed<'_> {
-    /// Gathered first, so that the triangle tests run over nine floats in a row as they do
-    /// for direct triangles (fetching each vertex inside the test loop cost far more there:
-    /// more live registers, spills and shuffles).
+impl Indexed<'_> {
+    /// The `count` triangles from `first`, gathered into `buf` as rows: the x coordinates of
+    /// a triangle's three vertices in index order, then their y, then their z, each row
+    /// padded to four floats. The test reads a row with one load and shears them without a
+    /// shuffle (a leaf's triangles gathered as nine floats each went through as many
+    /// shuffles as direct triangles). Empty when out of range.
     #[inline(always)]
-    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]] {
+    pub fn leaf_rows<'b>(
+        &self,
+        first: usize,
+        count: usize,
+        buf: &'b mut LeafRows,
+    ) -> &'b [[f32; 12]] {
         let Some(records) = self.records.get(first..first + count) else {
             return &[];
         };
@@ -89,10 +89,16 @@ impl TriangleSource for Indexed<'_> {
             let (Some(a), Some(b), Some(c)) = (v.get(a), v.get(b), v.get(c)) else {
                 return &[];
             };
-            *out = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
+            // The padding lanes keep what they hold (never read).
+            for (k, row) in out.chunks_exact_mut(4).enumerate() {
+                row[..3].copy_from_slice(&[a[k], b[k], c[k]]);
+            }
         }
         &buf[..records.len().min(buf.len())]
     }
+}
+
+impl TriangleSource for Indexed<'_> {
     #[inline(always)]
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
         let [a, b, c] = self.records.get(slot)?.vertices();
@@ -114,13 +120,6 @@ impl TriangleSource for Indexed<'_> {
 }
 
 impl TriangleSource for Triangles<'_> {
-    #[inline]
-    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]] {
-        match self {
-            Triangles::Direct(t) => t.leaf(first, count, buf),
-            Triangles::Indexed(t) => t.leaf(first, count, buf),
-        }
-    }
     #[inline]
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
         match self {

@@ -9,10 +9,10 @@
 
 use super::query::{BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, resolve_opacity};
 use super::scene::{Hit, HitKind, Scene};
-use super::triangle::permutation;
+use super::triangle::{ShearedRay, TriangleHit, permutation};
 use super::{Ray, RayFlags};
 use crate::error::Result;
-use crate::layout::triangles::{LeafBuf, TriangleSource, Triangles};
+use crate::layout::triangles::{Indexed, LeafRows, TriangleSource, Triangles};
 use crate::layout::view::View;
 use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, MAX_LEAF_SIZE, PrimKind};
 use crate::math::Affine;
@@ -30,7 +30,7 @@ pub struct Tracer<'s> {
     cached: Option<(u32, View<'s>)>,
     stack: Vec<Entry>,
     /// A leaf's indexed triangles, gathered for the tests.
-    leaf: Box<LeafBuf>,
+    leaf: Box<LeafRows>,
     /// The top level's only instance, when it is the identity: rays go straight to its
     /// bottom level, resolved once here.
     direct: Option<Direct<'s>>,
@@ -103,7 +103,7 @@ impl<'s> Tracer<'s> {
             tlas,
             cached: None,
             stack,
-            leaf: Box::new([[0.0; 9]; MAX_LEAF_SIZE]),
+            leaf: Box::new([[0.0; 12]; MAX_LEAF_SIZE]),
             direct: tlas.as_ref().and_then(|t| Direct::new(scene, t)),
         }
     }
@@ -268,7 +268,7 @@ fn enter<'s>(
     world: &mut World,
     slot: u32,
     stack: &mut [Entry],
-    leaf: &mut LeafBuf,
+    leaf: &mut LeafRows,
     sp: usize,
     best: &mut Best,
     first_hit: bool,
@@ -317,7 +317,7 @@ fn enter<'s>(
 #[inline(always)]
 fn walk_blas(
     stack: &mut [Entry],
-    leaf: &mut LeafBuf,
+    leaf: &mut LeafRows,
     base: usize,
     at: &BlasAt,
     local: &BoxRay,
@@ -353,9 +353,9 @@ fn walk_blas(
 /// [`trace_blas`] for the axis permutation of the ray and the layout of the triangles.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn walk_permuted<T: TriangleSource>(
+fn walk_permuted<T: LeafTriangles>(
     stack: &mut [Entry],
-    leaf: &mut LeafBuf,
+    leaf: &mut LeafRows,
     walk: Walk,
     at: &BlasAt,
     tris: T,
@@ -371,6 +371,42 @@ fn walk_permuted<T: TriangleSource>(
         3 => trace_blas::<3, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
         4 => trace_blas::<4, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
         _ => trace_blas::<5, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+    }
+}
+
+/// A layout's triangles as the bottom-level loop tests them: direct ones in place, indexed
+/// ones gathered as rows (see [`Indexed::leaf_rows`]). Both tests give the same bits.
+trait LeafTriangles: TriangleSource {
+    /// A triangle as the test reads it.
+    type Tri;
+    /// The `count` triangles from `first`: in place, or gathered into `buf`. Empty when out
+    /// of range.
+    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafRows) -> &'b [Self::Tri];
+    /// [`ShearedRay::intersect_axes`] for a triangle of this layout.
+    fn intersect<const P: usize>(ray: &ShearedRay, tri: &Self::Tri) -> Option<TriangleHit>;
+}
+
+impl LeafTriangles for &[[f32; 9]] {
+    type Tri = [f32; 9];
+    #[inline(always)]
+    fn leaf<'b>(&'b self, first: usize, count: usize, _: &'b mut LeafRows) -> &'b [[f32; 9]] {
+        self.get(first..first + count).unwrap_or_default()
+    }
+    #[inline(always)]
+    fn intersect<const P: usize>(ray: &ShearedRay, tri: &[f32; 9]) -> Option<TriangleHit> {
+        ray.intersect_axes::<P>(tri)
+    }
+}
+
+impl LeafTriangles for Indexed<'_> {
+    type Tri = [f32; 12];
+    #[inline(always)]
+    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafRows) -> &'b [[f32; 12]] {
+        self.leaf_rows(first, count, buf)
+    }
+    #[inline(always)]
+    fn intersect<const P: usize>(ray: &ShearedRay, tri: &[f32; 12]) -> Option<TriangleHit> {
+        ray.intersect_rows::<P>(tri)
     }
 }
 
@@ -411,9 +447,9 @@ struct BlasAt<'a, 's> {
 /// bottom-level loop is the hot one and gets the registers to itself.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn trace_blas<const P: usize, T: TriangleSource>(
+fn trace_blas<const P: usize, T: LeafTriangles>(
     stack: &mut [Entry],
-    buf: &mut LeafBuf,
+    buf: &mut LeafRows,
     walk: Walk,
     at: &BlasAt,
     tris: T,
@@ -472,7 +508,7 @@ fn trace_blas<const P: usize, T: TriangleSource>(
         if view.prim_kind == PrimKind::Triangles {
             let leaf = tris.leaf(first as usize, cur.count as usize, buf);
             for (p, tri) in (first..).zip(leaf) {
-                let Some(h) = sheared.intersect_axes::<P>(tri) else {
+                let Some(h) = T::intersect::<P>(&sheared, tri) else {
                     continue;
                 };
                 if !(h.t > ray.t_min && h.t < best.t) {
