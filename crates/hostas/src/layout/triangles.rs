@@ -29,9 +29,6 @@ impl Default for Triangles<'_> {
     }
 }
 
-/// Room for one leaf's triangles gathered as rows (see [`Indexed::leaf_rows`]).
-pub type LeafRows = [[f32; 12]; super::MAX_LEAF_SIZE];
-
 /// Stored triangles as the traversal reads them.
 pub trait TriangleSource: Copy {
     /// The vertices of stored triangle `slot`, in index order (`None` out of range).
@@ -68,33 +65,24 @@ impl TriangleSource for &[[f32; 9]] {
 }
 
 impl Indexed<'_> {
-    /// The `count` triangles from `first`, gathered into `buf` as rows: the x coordinates of
-    /// a triangle's three vertices in index order, then their y, then their z, each row
-    /// padded to four floats. The test reads a row with one load and shears them without a
-    /// shuffle (a leaf's triangles gathered as nine floats each went through as many
-    /// shuffles as direct triangles). Empty when out of range.
+    /// The `count` triangles from `first` (none when out of range), each gathered as the
+    /// caller reaches it, as rows: the x coordinates of its three vertices in index order,
+    /// then their y, then their z, each row padded to four floats (see
+    /// [`ShearedRay::intersect_rows`](crate::traverse::triangle::ShearedRay::intersect_rows):
+    /// a row is sheared without a shuffle). Gathering as the tests go, rather than a leaf
+    /// first, spares a loop whose exit leaf sizes make unpredictable and the stores and loads
+    /// of a buffer between them.
     #[inline(always)]
-    pub fn leaf_rows<'b>(
-        &self,
-        first: usize,
-        count: usize,
-        buf: &'b mut LeafRows,
-    ) -> &'b [[f32; 12]] {
-        let Some(records) = self.records.get(first..first + count) else {
-            return &[];
-        };
+    pub fn leaf_rows(&self, first: usize, count: usize) -> impl Iterator<Item = [f32; 12]> {
+        let records = self.records.get(first..first + count).unwrap_or_default();
         let v = self.vertices;
-        for (out, r) in buf.iter_mut().zip(records) {
+        records.iter().map_while(move |r| {
             let [a, b, c] = r.vertices();
-            let (Some(a), Some(b), Some(c)) = (v.get(a), v.get(b), v.get(c)) else {
-                return &[];
-            };
-            // The padding lanes keep what they hold (never read).
-            for (k, row) in out.chunks_exact_mut(4).enumerate() {
-                row[..3].copy_from_slice(&[a[k], b[k], c[k]]);
-            }
-        }
-        &buf[..records.len().min(buf.len())]
+            let (a, b, c) = (v.get(a)?, v.get(b)?, v.get(c)?);
+            Some([
+                a[0], b[0], c[0], 0.0, a[1], b[1], c[1], 0.0, a[2], b[2], c[2], 0.0,
+            ])
+        })
     }
 }
 
