@@ -76,12 +76,14 @@ impl Indexed<'_> {
     pub fn leaf_rows(&self, first: usize, count: usize) -> impl Iterator<Item = [f32; 12]> {
         let records = self.records.get(first..first + count).unwrap_or_default();
         let v = self.vertices;
-        records.iter().map_while(move |r| {
-            let [a, b, c] = r.vertices();
-            let (a, b, c) = (v.get(a)?, v.get(b)?, v.get(c)?);
-            Some([
+        // A vertex out of range (which a checked view never has) reads as NaNs, which no
+        // ray hits: the loop then has no exit but its end.
+        let vertex = move |i: usize| v.get(i).unwrap_or(&[f32::NAN; 3]);
+        records.iter().map(move |r| {
+            let [a, b, c] = r.vertices().map(vertex);
+            [
                 a[0], b[0], c[0], 0.0, a[1], b[1], c[1], 0.0, a[2], b[2], c[2], 0.0,
-            ])
+            ]
         })
     }
 }
