@@ -3,7 +3,8 @@
 //!
 //! Both give the same three vertices, in index order, for a slot, so every test computes the
 //! same bits whichever layout a structure has. Traversal's hot loop is instantiated per
-//! layout through [`TriangleSource`]; other readers go through [`Triangles`].
+//! layout (reading direct triangles in place, gathering indexed ones with
+//! [`Indexed::leaf_rows`]); other readers go through [`Triangles`].
 
 use super::TriRecord;
 
@@ -28,17 +29,10 @@ impl Default for Triangles<'_> {
     }
 }
 
-/// Room for one leaf's triangles.
-pub type LeafBuf = [[f32; 9]; super::MAX_LEAF_SIZE];
-
 /// Stored triangles as the traversal reads them.
 pub trait TriangleSource: Copy {
     /// The vertices of stored triangle `slot`, in index order (`None` out of range).
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]>;
-    /// The `count` triangles from `first` as nine floats each, in index order: in place, or
-    /// gathered into `buf` (at most [`MAX_LEAF_SIZE`](super::MAX_LEAF_SIZE), a leaf).
-    /// Empty when out of range.
-    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]];
     /// Requests the first cache lines of the `count` triangles from `first`.
     fn prefetch(&self, first: usize, count: usize);
     /// Stored triangles.
@@ -49,10 +43,6 @@ pub trait TriangleSource: Copy {
 }
 
 impl TriangleSource for &[[f32; 9]] {
-    #[inline(always)]
-    fn leaf<'b>(&'b self, first: usize, count: usize, _: &'b mut LeafBuf) -> &'b [[f32; 9]] {
-        self.get(first..first + count).unwrap_or_default()
-    }
     #[inline(always)]
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
         let v: &[[f32; 3]; 3] = bytemuck::cast_ref(self.get(slot)?);
@@ -74,25 +64,31 @@ impl TriangleSource for &[[f32; 9]] {
     }
 }
 
-impl TriangleSource for Indexed<'_> {
-    /// Gathered first, so that the triangle tests run over nine floats in a row as they do
-    /// for direct triangles (fetching each vertex inside the test loop cost far more there:
-    /// more live registers, spills and shuffles).
+impl Indexed<'_> {
+    /// The `count` triangles from `first` (none when out of range), each gathered as the
+    /// caller reaches it, as rows: the x coordinates of its three vertices in index order,
+    /// then their y, then their z, each row padded to four floats (see
+    /// [`ShearedRay::intersect_rows`](crate::traverse::triangle::ShearedRay::intersect_rows):
+    /// a row is sheared without a shuffle). Gathering as the tests go, rather than a leaf
+    /// first, spares a loop whose exit leaf sizes make unpredictable and the stores and loads
+    /// of a buffer between them.
     #[inline(always)]
-    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]] {
-        let Some(records) = self.records.get(first..first + count) else {
-            return &[];
-        };
+    pub fn leaf_rows(&self, first: usize, count: usize) -> impl Iterator<Item = [f32; 12]> {
+        let records = self.records.get(first..first + count).unwrap_or_default();
         let v = self.vertices;
-        for (out, r) in buf.iter_mut().zip(records) {
-            let [a, b, c] = r.vertices();
-            let (Some(a), Some(b), Some(c)) = (v.get(a), v.get(b), v.get(c)) else {
-                return &[];
-            };
-            *out = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-        }
-        &buf[..records.len().min(buf.len())]
+        // A vertex out of range (which a checked view never has) reads as NaNs, which no
+        // ray hits: the loop then has no exit but its end.
+        let vertex = move |i: usize| v.get(i).unwrap_or(&[f32::NAN; 3]);
+        records.iter().map(move |r| {
+            let [a, b, c] = r.vertices().map(vertex);
+            [
+                a[0], b[0], c[0], 0.0, a[1], b[1], c[1], 0.0, a[2], b[2], c[2], 0.0,
+            ]
+        })
     }
+}
+
+impl TriangleSource for Indexed<'_> {
     #[inline(always)]
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
         let [a, b, c] = self.records.get(slot)?.vertices();
@@ -114,13 +110,6 @@ impl TriangleSource for Indexed<'_> {
 }
 
 impl TriangleSource for Triangles<'_> {
-    #[inline]
-    fn leaf<'b>(&'b self, first: usize, count: usize, buf: &'b mut LeafBuf) -> &'b [[f32; 9]] {
-        match self {
-            Triangles::Direct(t) => t.leaf(first, count, buf),
-            Triangles::Indexed(t) => t.leaf(first, count, buf),
-        }
-    }
     #[inline]
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
         match self {

@@ -9,14 +9,15 @@
 
 use super::query::{BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, resolve_opacity};
 use super::scene::{Hit, HitKind, Scene};
-use super::triangle::permutation;
+use super::triangle::{ShearedRay, TriangleHit, permutation};
 use super::{Ray, RayFlags};
 use crate::error::Result;
-use crate::layout::triangles::{LeafBuf, TriangleSource, Triangles};
+use crate::layout::triangles::{Indexed, TriangleSource, Triangles};
 use crate::layout::view::View;
-use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, MAX_LEAF_SIZE, PrimKind};
+use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind};
 use crate::math::Affine;
 use ash::vk;
+use std::borrow::Borrow;
 
 thread_local! {
     static STACKS: std::cell::RefCell<Vec<Vec<Entry>>> = const { std::cell::RefCell::new(Vec::new()) };
@@ -29,8 +30,6 @@ pub struct Tracer<'s> {
     /// The bottom-level view used last (consecutive instances often share one).
     cached: Option<(u32, View<'s>)>,
     stack: Vec<Entry>,
-    /// A leaf's indexed triangles, gathered for the tests.
-    leaf: Box<LeafBuf>,
     /// The top level's only instance, when it is the identity: rays go straight to its
     /// bottom level, resolved once here.
     direct: Option<Direct<'s>>,
@@ -103,7 +102,6 @@ impl<'s> Tracer<'s> {
             tlas,
             cached: None,
             stack,
-            leaf: Box::new([[0.0; 9]; MAX_LEAF_SIZE]),
             direct: tlas.as_ref().and_then(|t| Direct::new(scene, t)),
         }
     }
@@ -149,16 +147,7 @@ impl<'s> Tracer<'s> {
                     slot: 0,
                     blas: d.blas,
                 };
-                walk_blas(
-                    &mut self.stack,
-                    &mut self.leaf,
-                    0,
-                    &at,
-                    &boxes,
-                    ray,
-                    &mut best,
-                    first_hit,
-                );
+                walk_blas(&mut self.stack, 0, &at, &boxes, ray, &mut best, first_hit);
             }
             return Ok(hit(&best, d.inst, Some(&d.view)));
         }
@@ -175,7 +164,6 @@ impl<'s> Tracer<'s> {
         };
         // Disjoint borrows of the tracer's parts (the stack is borrowed for the whole trace).
         let stack = &mut self.stack[..];
-        let leaf = &mut *self.leaf;
         let scene = self.scene;
         let cached = &mut self.cached;
         let mut sp = 0;
@@ -203,8 +191,7 @@ impl<'s> Tracer<'s> {
                 let first = cur.child & !LEAF_BIT;
                 for slot in first..first + cur.count {
                     let found = enter(
-                        scene, cached, &tlas, &mut world, slot, stack, leaf, sp, &mut best,
-                        first_hit,
+                        scene, cached, &tlas, &mut world, slot, stack, sp, &mut best, first_hit,
                     );
                     if found && first_hit {
                         break 'top;
@@ -268,7 +255,6 @@ fn enter<'s>(
     world: &mut World,
     slot: u32,
     stack: &mut [Entry],
-    leaf: &mut LeafBuf,
     sp: usize,
     best: &mut Best,
     first_hit: bool,
@@ -307,7 +293,7 @@ fn enter<'s>(
         slot,
         blas: bi,
     };
-    walk_blas(stack, leaf, sp, &at, local, ray, best, first_hit)
+    walk_blas(stack, sp, &at, local, ray, best, first_hit)
 }
 
 /// [`trace_blas`] for the axis permutation of the ray (`local`: in the instance's space).
@@ -317,7 +303,6 @@ fn enter<'s>(
 #[inline(always)]
 fn walk_blas(
     stack: &mut [Entry],
-    leaf: &mut LeafBuf,
     base: usize,
     at: &BlasAt,
     local: &BoxRay,
@@ -341,21 +326,16 @@ fn walk_blas(
     };
     let walk = Walk { base, sp, cur };
     match view.triangles {
-        Triangles::Direct(t) => {
-            walk_permuted(stack, leaf, walk, at, t, local, ray, best, first_hit)
-        }
-        Triangles::Indexed(t) => {
-            walk_permuted(stack, leaf, walk, at, t, local, ray, best, first_hit)
-        }
+        Triangles::Direct(t) => walk_permuted(stack, walk, at, t, local, ray, best, first_hit),
+        Triangles::Indexed(t) => walk_permuted(stack, walk, at, t, local, ray, best, first_hit),
     }
 }
 
 /// [`trace_blas`] for the axis permutation of the ray and the layout of the triangles.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn walk_permuted<T: TriangleSource>(
+fn walk_permuted<T: LeafTriangles>(
     stack: &mut [Entry],
-    leaf: &mut LeafBuf,
     walk: Walk,
     at: &BlasAt,
     tris: T,
@@ -365,12 +345,48 @@ fn walk_permuted<T: TriangleSource>(
     first_hit: bool,
 ) -> bool {
     match permutation(local.direction) {
-        0 => trace_blas::<0, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
-        1 => trace_blas::<1, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
-        2 => trace_blas::<2, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
-        3 => trace_blas::<3, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
-        4 => trace_blas::<4, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
-        _ => trace_blas::<5, T>(stack, leaf, walk, at, tris, local, ray, best, first_hit),
+        0 => trace_blas::<0, T>(stack, walk, at, tris, local, ray, best, first_hit),
+        1 => trace_blas::<1, T>(stack, walk, at, tris, local, ray, best, first_hit),
+        2 => trace_blas::<2, T>(stack, walk, at, tris, local, ray, best, first_hit),
+        3 => trace_blas::<3, T>(stack, walk, at, tris, local, ray, best, first_hit),
+        4 => trace_blas::<4, T>(stack, walk, at, tris, local, ray, best, first_hit),
+        _ => trace_blas::<5, T>(stack, walk, at, tris, local, ray, best, first_hit),
+    }
+}
+
+/// A layout's triangles as the bottom-level loop tests them: direct ones in place, indexed
+/// ones gathered one at a time as rows (see [`Indexed::leaf_rows`]). Both tests give the
+/// same bits.
+trait LeafTriangles: TriangleSource {
+    /// A triangle as the test reads it.
+    type Tri;
+    /// The `count` triangles from `first` (none when out of range).
+    fn leaf(&self, first: usize, count: usize) -> impl Iterator<Item = impl Borrow<Self::Tri>>;
+    /// [`ShearedRay::intersect_axes`] for a triangle of this layout.
+    fn intersect<const P: usize>(ray: &ShearedRay, tri: &Self::Tri) -> Option<TriangleHit>;
+}
+
+impl LeafTriangles for &[[f32; 9]] {
+    type Tri = [f32; 9];
+    #[inline(always)]
+    fn leaf(&self, first: usize, count: usize) -> impl Iterator<Item = impl Borrow<[f32; 9]>> {
+        self.get(first..first + count).unwrap_or_default().iter()
+    }
+    #[inline(always)]
+    fn intersect<const P: usize>(ray: &ShearedRay, tri: &[f32; 9]) -> Option<TriangleHit> {
+        ray.intersect_axes::<P>(tri)
+    }
+}
+
+impl LeafTriangles for Indexed<'_> {
+    type Tri = [f32; 12];
+    #[inline(always)]
+    fn leaf(&self, first: usize, count: usize) -> impl Iterator<Item = impl Borrow<[f32; 12]>> {
+        self.leaf_rows(first, count)
+    }
+    #[inline(always)]
+    fn intersect<const P: usize>(ray: &ShearedRay, tri: &[f32; 12]) -> Option<TriangleHit> {
+        ray.intersect_rows::<P>(tri)
     }
 }
 
@@ -411,9 +427,8 @@ struct BlasAt<'a, 's> {
 /// bottom-level loop is the hot one and gets the registers to itself.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn trace_blas<const P: usize, T: TriangleSource>(
+fn trace_blas<const P: usize, T: LeafTriangles>(
     stack: &mut [Entry],
-    buf: &mut LeafBuf,
     walk: Walk,
     at: &BlasAt,
     tris: T,
@@ -470,9 +485,8 @@ fn trace_blas<const P: usize, T: TriangleSource>(
         let first = cur.child & !LEAF_BIT;
         let range = first as usize..first as usize + cur.count as usize;
         if view.prim_kind == PrimKind::Triangles {
-            let leaf = tris.leaf(first as usize, cur.count as usize, buf);
-            for (p, tri) in (first..).zip(leaf) {
-                let Some(h) = sheared.intersect_axes::<P>(tri) else {
+            for (p, tri) in (first..).zip(tris.leaf(first as usize, cur.count as usize)) {
+                let Some(h) = T::intersect::<P>(&sheared, tri.borrow()) else {
                     continue;
                 };
                 if !(h.t > ray.t_min && h.t < best.t) {

@@ -10,6 +10,7 @@
 //! with the same winding, exactly one owns it, and of a closed fan exactly one owns the vertex.
 
 use crate::math::Vec3;
+use wide::f32x4;
 
 /// A ray prepared for the watertight test.
 #[derive(Clone, Copy, Debug)]
@@ -123,6 +124,57 @@ impl ShearedRay {
     pub fn intersect_axes<const P: usize>(&self, v: &[f32; 9]) -> Option<TriangleHit> {
         let v: &[[f32; 3]; 3] = bytemuck::cast_ref(v);
         self.intersect_corners::<P>([&v[0], &v[1], &v[2]])
+    }
+
+    /// [`ShearedRay::intersect_axes`] for a triangle given as rows (the x coordinates of its
+    /// vertices in index order, then their y, then their z, each row padded to four floats):
+    /// the same operations on the same values, a row at a time.
+    #[inline(always)]
+    pub fn intersect_rows<const P: usize>(&self, rows: &[f32; 12]) -> Option<TriangleHit> {
+        let (kx, ky, kz) = AXES[P];
+        let o = self.origin;
+        let row = |k: usize| {
+            let r = [
+                rows[4 * k],
+                rows[4 * k + 1],
+                rows[4 * k + 2],
+                rows[4 * k + 3],
+            ];
+            f32x4::from(r) - f32x4::splat(o[k])
+        };
+        let z = row(kz);
+        let x = row(kx) - f32x4::splat(self.sx) * z;
+        let y = row(ky) - f32x4::splat(self.sy) * z;
+        // Lanes 0, 1 and 2 are the vertices in index order: u = cx * by - cy * bx, and so
+        // on cyclically (the padding lane is never read).
+        let next = |v: f32x4| {
+            let [a, b, c, d] = v.to_array();
+            f32x4::from([b, c, a, d])
+        };
+        let prev = |v: f32x4| {
+            let [a, b, c, d] = v.to_array();
+            f32x4::from([c, a, b, d])
+        };
+        let uvw = prev(x) * next(y) - prev(y) * next(x);
+        let zero = f32x4::ZERO;
+        let lanes = |m: f32x4| m.to_bitmask() & 0b111;
+        let [u, v, w, _] = uvw.to_array();
+        let [ax, bx, cx, _] = x.to_array();
+        let [ay, by, cy, _] = y.to_array();
+        let [az, bz, cz, _] = z.to_array();
+        let s = Sheared {
+            x: [ax, bx, cx],
+            y: [ay, by, cy],
+            z: [az, bz, cz],
+        };
+        // As in `intersect_corners`: one branch per outcome.
+        if lanes(uvw.simd_eq(zero)) != 0 {
+            return self.on_edge(s);
+        }
+        if (lanes(uvw.simd_lt(zero)) != 0) & (lanes(uvw.simd_gt(zero)) != 0) {
+            return None;
+        }
+        self.hit(&s.z, u, v, w)
     }
 
     /// [`ShearedRay::intersect_axes`] for a triangle given as its three vertices in index
