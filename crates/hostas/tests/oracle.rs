@@ -461,3 +461,22 @@ fn large_blas_matches_oracle() {
         }
     }
 }
+
+/// Seeds whose scenes (strips: triangles in different leaves sharing a vertex) sent a ray
+/// through a shared vertex where the two triangles' hits differ by an ulp: the nearer one's box
+/// had an entry distance rounded past the farther hit and was pruned, so the farther hit was
+/// reported. Boxes are now pruned with a little slack (`query::prune_limit`).
+#[test]
+fn rays_through_shared_vertices_find_the_nearer_hit() {
+    for seed in [
+        6349006236474401650u64,
+        10696786310483891125,
+        10989639710171845159,
+        15409750116442605428,
+    ] {
+        run(seed, 60, false, 60).unwrap();
+    }
+    for seed in [8187941389045683500u64, 17392648709487903280] {
+        run_single(seed, 60, seed % 2 == 1, 60).unwrap();
+    }
+}

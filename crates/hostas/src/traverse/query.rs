@@ -160,6 +160,20 @@ impl Stack {
 pub(super) const ROBUST_FAR: f32 =
     1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
 
+/// How far past the nearest hit so far a box's entry distance may lie and the box still be
+/// entered. A triangle's t and the entry distance of a box around it are rounded
+/// independently, so a triangle hit at a vertex on the box's boundary can come out a few ulps
+/// nearer than the box's entry: a ray through a vertex that triangles in two leaves share
+/// found the farther of the two hits when the nearer one's box was pruned by exactly that.
+/// 2^-16 relative (hundreds of ulps) covers it and costs no measurable pruning.
+const PRUNE_SLACK: f32 = 1.0 + 1.0 / 65536.0;
+
+/// The farthest entry distance of a box that may still hold a hit nearer than `t_max`.
+#[inline(always)]
+pub(super) fn prune_limit(t_max: f32) -> f32 {
+    t_max * PRUNE_SLACK
+}
+
 #[derive(Clone, Copy)]
 pub(super) struct BoxRay {
     origin: Vec3,
@@ -227,7 +241,7 @@ impl BoxRay {
             (fx - ox) * jx,
             fmin8(
                 (fy - oy) * jy,
-                fmin8((fz - oz) * jz, s(fmin(t_max, f32::MAX))),
+                fmin8((fz - oz) * jz, s(fmin(prune_limit(t_max), f32::MAX))),
             ),
         );
         (near.simd_le(far).to_bitmask(), near.to_array())
@@ -285,7 +299,7 @@ impl<'s> Level<'s> {
     #[inline(always)]
     fn next_leaf(&mut self, t_min: f32, t_max: f32) -> bool {
         while let Some(e) = self.stack.pop() {
-            if e.t > t_max {
+            if e.t > prune_limit(t_max) {
                 continue;
             }
             if e.child & LEAF_BIT != 0 {

@@ -7,7 +7,9 @@
 //! candidates are not materialized, and the ids of the hit are looked up once at the end.
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
-use super::query::{BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, resolve_opacity};
+use super::query::{
+    BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
+};
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::{ShearedRay, TriangleHit, permutation};
 use super::{Ray, RayFlags};
@@ -405,7 +407,7 @@ fn pop(stack: &[Entry], sp: &mut usize, base: usize, t_max: f32) -> Option<Entry
     while *sp > base {
         *sp -= 1;
         let e = stack.get(*sp)?;
-        if e.t <= t_max {
+        if e.t <= prune_limit(t_max) {
             return Some(*e);
         }
     }
