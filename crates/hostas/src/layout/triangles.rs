@@ -35,11 +35,6 @@ pub trait TriangleSource: Copy {
     fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]>;
     /// Requests the first cache lines of the `count` triangles from `first`.
     fn prefetch(&self, first: usize, count: usize);
-    /// Stored triangles.
-    fn len(&self) -> usize;
-    fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
 }
 
 impl TriangleSource for &[[f32; 9]] {
@@ -57,10 +52,6 @@ impl TriangleSource for &[[f32; 9]] {
         if let Some(t) = self.get(first + count.saturating_sub(1)) {
             crate::math::prefetch(t);
         }
-    }
-    #[inline(always)]
-    fn len(&self) -> usize {
-        <[[f32; 9]]>::len(self)
     }
 }
 
@@ -103,10 +94,6 @@ impl TriangleSource for Indexed<'_> {
             crate::math::prefetch(r);
         }
     }
-    #[inline(always)]
-    fn len(&self) -> usize {
-        self.records.len()
-    }
 }
 
 impl TriangleSource for Triangles<'_> {
@@ -122,13 +109,6 @@ impl TriangleSource for Triangles<'_> {
         match self {
             Triangles::Direct(t) => t.prefetch(first, count),
             Triangles::Indexed(t) => t.prefetch(first, count),
-        }
-    }
-    #[inline]
-    fn len(&self) -> usize {
-        match self {
-            Triangles::Direct(t) => t.len(),
-            Triangles::Indexed(t) => t.len(),
         }
     }
 }
