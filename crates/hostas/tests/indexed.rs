@@ -104,18 +104,8 @@ fn indexed_triangles_trace_as_the_same_tree_with_direct_ones() {
     let blas = mixed_blas(&mut r);
     for preset in [F::PREFER_FAST_TRACE, F::empty(), F::LOW_MEMORY] {
         let flags = preset | F::ALLOW_DATA_ACCESS;
-        let [indexed, direct] = [flags, flags | F::ALLOW_UPDATE].map(|f| {
-            blas.with_inputs(|geoms, ranges| {
-                hostas::quick::build(
-                    &device,
-                    vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
-                    f,
-                    geoms,
-                    ranges,
-                )
-            })
-            .unwrap()
-        });
+        let [indexed, direct] =
+            [flags, flags | F::ALLOW_UPDATE].map(|f| blas.build(&device, f).unwrap());
         let (si, sd) = (
             device.statistics(indexed).unwrap(),
             device.statistics(direct).unwrap(),
@@ -166,19 +156,7 @@ fn triangles_that_share_nothing_and_fast_builds_stay_direct() {
     let soup = hostas_testkit::BlasDesc {
         geometries: vec![soup],
     };
-    let build = |desc: &hostas_testkit::BlasDesc, flags| {
-        desc.with_inputs(|geoms, ranges| {
-            hostas::quick::build(
-                &device,
-                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
-                flags,
-                geoms,
-                ranges,
-            )
-        })
-        .unwrap()
-    };
-    let a = build(&soup, F::PREFER_FAST_TRACE);
+    let a = soup.build(&device, F::PREFER_FAST_TRACE).unwrap();
     assert!(!device.statistics(a).unwrap().indexed_triangles);
     let (pos, idx) = generate::uv_sphere(20);
     let b = hostas::quick::build_triangle_blas(&device, &pos, &idx, F::PREFER_FAST_BUILD).unwrap();
