@@ -29,20 +29,13 @@ impl Default for Triangles<'_> {
     }
 }
 
-/// Stored triangles as the traversal reads them.
+/// Stored triangles as the traversal prefetches them (a pushed leaf's first lines).
 pub trait TriangleSource: Copy {
-    /// The vertices of stored triangle `slot`, in index order (`None` out of range).
-    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]>;
     /// Requests the first cache lines of the `count` triangles from `first`.
     fn prefetch(&self, first: usize, count: usize);
 }
 
 impl TriangleSource for &[[f32; 9]] {
-    #[inline(always)]
-    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
-        let v: &[[f32; 3]; 3] = bytemuck::cast_ref(self.get(slot)?);
-        Some([&v[0], &v[1], &v[2]])
-    }
     #[inline(always)]
     fn prefetch(&self, first: usize, count: usize) {
         // The first and last triangle: a leaf's 36-byte triangles span at most a few lines.
@@ -81,12 +74,6 @@ impl Indexed<'_> {
 
 impl TriangleSource for Indexed<'_> {
     #[inline(always)]
-    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
-        let [a, b, c] = self.records.get(slot)?.vertices();
-        let v = self.vertices;
-        Some([v.get(a)?, v.get(b)?, v.get(c)?])
-    }
-    #[inline(always)]
     fn prefetch(&self, first: usize, _count: usize) {
         // A leaf's records (at most 15 of 8 bytes) and, where the first one is already in the
         // caches, nothing more: the vertices' addresses are only known once it is read.
@@ -97,13 +84,6 @@ impl TriangleSource for Indexed<'_> {
 }
 
 impl TriangleSource for Triangles<'_> {
-    #[inline]
-    fn corners(&self, slot: usize) -> Option<[&[f32; 3]; 3]> {
-        match self {
-            Triangles::Direct(t) => t.corners(slot),
-            Triangles::Indexed(t) => t.corners(slot),
-        }
-    }
     #[inline]
     fn prefetch(&self, first: usize, count: usize) {
         match self {
@@ -116,7 +96,14 @@ impl TriangleSource for Triangles<'_> {
 impl Triangles<'_> {
     /// The vertices of stored triangle `slot` as nine floats, in index order.
     pub fn get(&self, slot: usize) -> Option<[f32; 9]> {
-        let [a, b, c] = self.corners(slot)?;
-        Some([a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]])
+        match self {
+            Triangles::Direct(t) => t.get(slot).copied(),
+            Triangles::Indexed(t) => {
+                let [a, b, c] = t.records.get(slot)?.vertices();
+                let v = t.vertices;
+                let [a, b, c] = [v.get(a)?, v.get(b)?, v.get(c)?];
+                Some([a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]])
+            }
+        }
     }
 }

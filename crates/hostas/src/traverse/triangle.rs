@@ -122,8 +122,38 @@ impl ShearedRay {
     /// time (the batch tracer instantiates its whole bottom-level loop per permutation).
     #[inline(always)]
     pub fn intersect_axes<const P: usize>(&self, v: &[f32; 9]) -> Option<TriangleHit> {
+        let (kx, ky, kz) = AXES[P];
+        let o = self.origin;
         let v: &[[f32; 3]; 3] = bytemuck::cast_ref(v);
-        self.intersect_corners::<P>([&v[0], &v[1], &v[2]])
+        let [a, b, c] = v.map(|p| [p[0] - o[0], p[1] - o[1], p[2] - o[2]]);
+        let s = Sheared {
+            x: [
+                a[kx] - self.sx * a[kz],
+                b[kx] - self.sx * b[kz],
+                c[kx] - self.sx * c[kz],
+            ],
+            y: [
+                a[ky] - self.sy * a[kz],
+                b[ky] - self.sy * b[kz],
+                c[ky] - self.sy * c[kz],
+            ],
+            z: [a[kz], b[kz], c[kz]],
+        };
+        let [ax, bx, cx] = s.x;
+        let [ay, by, cy] = s.y;
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        // Bitwise, not short-circuit: one branch per outcome instead of one per comparison
+        // (whether a ray covers a triangle is data-dependent; mispredictions cost more than
+        // the extra comparisons).
+        if (u == 0.0) | (v == 0.0) | (w == 0.0) {
+            return self.on_edge(s);
+        }
+        if ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0)) {
+            return None;
+        }
+        self.hit(&s.z, u, v, w)
     }
 
     /// [`ShearedRay::intersect_axes`] for a triangle given as rows (the x coordinates of its
@@ -167,48 +197,11 @@ impl ShearedRay {
             y: [ay, by, cy],
             z: [az, bz, cz],
         };
-        // As in `intersect_corners`: one branch per outcome.
+        // As in `intersect_axes`: one branch per outcome.
         if lanes(uvw.simd_eq(zero)) != 0 {
             return self.on_edge(s);
         }
         if (lanes(uvw.simd_lt(zero)) != 0) & (lanes(uvw.simd_gt(zero)) != 0) {
-            return None;
-        }
-        self.hit(&s.z, u, v, w)
-    }
-
-    /// [`ShearedRay::intersect_axes`] for a triangle given as its three vertices in index
-    /// order, wherever they are stored.
-    #[inline(always)]
-    pub fn intersect_corners<const P: usize>(&self, v: [&[f32; 3]; 3]) -> Option<TriangleHit> {
-        let (kx, ky, kz) = AXES[P];
-        let o = self.origin;
-        let [a, b, c] = v.map(|p| [p[0] - o[0], p[1] - o[1], p[2] - o[2]]);
-        let s = Sheared {
-            x: [
-                a[kx] - self.sx * a[kz],
-                b[kx] - self.sx * b[kz],
-                c[kx] - self.sx * c[kz],
-            ],
-            y: [
-                a[ky] - self.sy * a[kz],
-                b[ky] - self.sy * b[kz],
-                c[ky] - self.sy * c[kz],
-            ],
-            z: [a[kz], b[kz], c[kz]],
-        };
-        let [ax, bx, cx] = s.x;
-        let [ay, by, cy] = s.y;
-        let u = cx * by - cy * bx;
-        let v = ax * cy - ay * cx;
-        let w = bx * ay - by * ax;
-        // Bitwise, not short-circuit: one branch per outcome instead of one per comparison
-        // (whether a ray covers a triangle is data-dependent; mispredictions cost more than
-        // the extra comparisons).
-        if (u == 0.0) | (v == 0.0) | (w == 0.0) {
-            return self.on_edge(s);
-        }
-        if ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0)) {
             return None;
         }
         self.hit(&s.z, u, v, w)
