@@ -1211,7 +1211,6 @@ fn internal(what: &str) -> Error {
     Error::NotSupported(format!("internal: {what}"))
 }
 
-/// Writes the primitive sections in the tree's final order.
 /// Rewrites the built triangles in `bytes` as indexed ones sharing the application's
 /// vertices (same geometry, same vertex index), where that makes the structure smaller.
 fn share_vertices(
@@ -1222,7 +1221,9 @@ fn share_vertices(
 ) -> Result<bool> {
     // Each indexed geometry's vertex numbers (0..=maxVertex) get keys of their own.
     let mut geometries = Vec::with_capacity(records.len());
-    let mut key_count = 0u64;
+    // At most `bound` vertices get stored (a geometry without indices shares none): when
+    // even that many would not fit, sharing cannot pay (a triangle soup) and is not tried.
+    let (mut key_count, mut bound, mut triangles) = (0u64, 0u64, 0u64);
     for (r, reader) in records.iter().zip(readers) {
         let Reader::Triangles(t) = reader else {
             return Ok(false);
@@ -1230,21 +1231,11 @@ fn share_vertices(
         let indexed = t.indexed_vertices();
         geometries.push((r.first_primitive, key_count, indexed));
         key_count += indexed.map_or(0, |v| v.max_vertex() + 1);
+        let corners = 3 * r.primitive_count as u64;
+        bound += indexed.map_or(corners, |v| corners.min(v.max_vertex() + 1));
+        triangles += r.primitive_count as u64;
     }
-    // At most this many vertices get stored (a geometry without indices shares none): when
-    // even that many would not fit, sharing cannot pay (a triangle soup) and is not tried.
-    let bound: u64 = records
-        .iter()
-        .zip(&geometries)
-        .map(|(r, g)| {
-            let corners = 3 * r.primitive_count as u64;
-            g.2.map_or(corners, |v| corners.min(v.max_vertex() + 1))
-        })
-        .sum();
-    if !layout::indexed::may_pay(
-        bound,
-        records.iter().map(|r| r.primitive_count as u64).sum(),
-    ) {
+    if !layout::indexed::may_pay(bound, triangles) {
         return Ok(false);
     }
     if let [(_, _, Some(g))] = geometries[..] {
@@ -1269,6 +1260,7 @@ fn share_vertices(
     layout::indexed::share_vertices(bytes, keys, key_count, scratch)
 }
 
+/// Writes the primitive sections in the tree's final order.
 fn write_prims(
     bytes: &mut [u8],
     h: &Header,
