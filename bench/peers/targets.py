@@ -33,6 +33,8 @@ def get(r, scene, lib, key, field, threads=None):
 COLUMNS = [
     ("fast-trace build ÷ Embree MEDIUM, 1T", "≥ 1.5",
      ("hostas", "fast_trace", "build_mtris_s", 1), ("embree", "MEDIUM", "build_mtris_s", 1)),
+    ("fast-trace SAH(1,1) ÷ Embree MEDIUM, 8-wide", "≤ 1.0",
+     ("hostas", "fast_trace", "sah8_ct1_ci1", None), ("embree", "MEDIUM", "sah8_ct1_ci1", None)),
     ("fast-build build ÷ Embree LOW, 1T", "≥ 1.5",
      ("hostas", "fast_build", "build_mtris_s", 1), ("embree", "LOW", "build_mtris_s", 1)),
     ("fast-trace primary ÷ MEDIUM", "≥ 1.0",

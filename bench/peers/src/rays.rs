@@ -90,7 +90,7 @@ pub fn generate(scene: &Scene, width: usize) -> RaySet {
             primary.push(Ray { o: eye, d });
         }
     }
-    let mut rng = Rng::new(0x1C0_4E2E_47);
+    let mut rng = Rng::new(0x1_C04E_2E47);
     let incoherent = (0..width * width)
         .map(|_| {
             let o = [0, 1, 2].map(|k| rng.range(scene.bmin[k], scene.bmax[k]));

@@ -151,6 +151,7 @@ fn run_preset(
         .statistics(blas)
         .map_err(|e| format!("statistics: {e}"))?;
     row.sah = Some(st.sah_cost as f64);
+    row.sah8 = row.sah;
     row.bytes = Some(st.used_bytes);
     row.extra.insert(
         "hostas_stats".into(),
