@@ -4,6 +4,10 @@
 //! the final order is the order of `refs` on return. Small ranges are split with an exact SAH
 //! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
 //! sweep split hands its sides their orders.
+//!
+//! While the builder runs, each reference holds its bounds as `(lo, -hi)` ([`Box8`]): negated
+//! once on entry (with the pass that bounds the root) and restored on return, instead of on
+//! every binning, partition and sweep that reads it.
 
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -28,14 +32,15 @@ struct Box8(f32x8);
 impl Box8 {
     const EMPTY: Box8 = Box8(f32x8::new([f32::INFINITY; 8]));
 
+    /// The box of a reference as the builder holds it (`hi` negated, see [`enter`]).
     #[inline(always)]
     fn of(r: &PrimRef) -> Box8 {
-        Box8(f32x8::new(bytemuck::cast(*r)) ^ NEG_HI)
+        Box8(bytemuck::cast(*r))
     }
     /// The reference this box was made from by [`Box8::of`].
     #[inline(always)]
     fn prim_ref(&self) -> PrimRef {
-        bytemuck::cast(self.0 ^ NEG_HI)
+        bytemuck::cast(self.0)
     }
     /// Grows to hold `o`: `minps` with the operand order of `fmin`/`fmax` (a NaN in `o`
     /// wins over the current bound).
@@ -96,11 +101,12 @@ fn half_areas3(b: &[Box8; 3]) -> f32x4 {
     x * y + y * z + z * x
 }
 
-/// The doubled centroid of a reference (lane 3 is meaningless).
+/// The doubled centroid of a reference (lane 3 is meaningless): `lo - (-hi)`, the same bits
+/// as `lo + hi`.
 #[inline(always)]
 fn center2(r: &PrimRef) -> f32x4 {
-    let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
-    f32x4::new(lo) + f32x4::new(hi)
+    let [lo, neg_hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
+    f32x4::new(lo) - f32x4::new(neg_hi)
 }
 
 /// Bounds of a range and of its primitives' (doubled) centroids.
@@ -522,15 +528,16 @@ impl<const A: usize> Plane<A> {
     fn new(t: f32) -> Plane<A> {
         Plane { t: f32x8::splat(t) }
     }
-    /// A reference as one vector, its doubled centroid in both halves and the mask of the
-    /// side it goes to: all lanes set when right of the plane, none when left.
+    /// A reference as one vector, its doubled centroid `c` as the point `(c, -c)` (`lo - (-hi)`
+    /// and `-hi - lo`) and the mask of the side it goes to: all lanes set when right of the
+    /// plane, none when left.
     #[inline(always)]
     fn classify(&self, r: &PrimRef) -> (f32x8, f32x8, f32x8) {
         let v: f32x8 = bytemuck::cast(*r);
-        let [lo, hi]: [f32x4; 2] = bytemuck::cast(v);
-        let c2: f32x8 = v + f32x8::from(bytemuck::cast::<_, [f32; 8]>([hi, lo]));
-        let right = f32x8::splat(c2.to_array()[A]).simd_ge(self.t);
-        (v, c2, right)
+        let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(v);
+        let p: f32x8 = v - f32x8::from(bytemuck::cast::<_, [f32; 8]>([neg_hi, lo]));
+        let right = f32x8::splat(p.to_array()[A]).simd_ge(self.t);
+        (v, p, right)
     }
     #[inline(always)]
     fn left_of(&self, r: &PrimRef) -> bool {
@@ -560,10 +567,11 @@ impl SideBounds {
         left: Box8::EMPTY,
         right: Box8::EMPTY,
     };
-    /// Grows the side of `right` by the centroid given in both halves.
+    /// Grows the side of `right` by the centroid given as `(c, -c)`. (Where `lo + hi` is +0,
+    /// `-hi - lo` may be +0 too: a centroid bound's sign of zero, which changes no bin, no
+    /// threshold and no median split.)
     #[inline(always)]
-    fn grow(&mut self, c2: f32x8, right: f32x8) {
-        let p = c2 ^ NEG_HI;
+    fn grow(&mut self, p: f32x8, right: f32x8) {
         self.left.grow_point(p | right);
         self.right
             .grow_point(right.select(p, f32x8::splat(f32::NAN)));
@@ -642,8 +650,8 @@ fn parallel_partition<const A: usize>(
             let mut sides = SideBounds::EMPTY;
             let (mut li, mut ri) = (0, 0);
             for r in c {
-                let (_, c2, right) = plane.classify(r);
-                sides.grow(c2, right);
+                let (_, p, right) = plane.classify(r);
+                sides.grow(p, right);
                 if right.to_bitmask() == 0 {
                     lp[li] = *r;
                     li += 1;
@@ -676,8 +684,8 @@ fn stable_partition<const A: usize>(
     let mut sides = SideBounds::EMPTY;
     let (mut li, mut ri) = (0, left);
     for r in src {
-        let (v, c2, right) = plane.classify(r);
-        sides.grow(c2, right);
+        let (v, p, right) = plane.classify(r);
+        sides.grow(p, right);
         // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
         let right_lane = mask_lane(right);
         let at = if right_lane == 0 { li } else { ri };
@@ -710,8 +718,8 @@ fn partition<const A: usize, const FROM_AUX: bool>(
     let mut i = 0usize;
     for j in 0..refs.len() {
         let r = if FROM_AUX { &aux[j] } else { &refs[j] };
-        let (v, c2, right) = plane.classify(r);
-        sides.grow(c2, right);
+        let (v, p, right) = plane.classify(r);
+        sides.grow(p, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
         refs[j] = refs[i];
         refs[i] = bytemuck::cast(v);
@@ -1018,8 +1026,9 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
         .unwrap_or(0);
     if ext[axis] > 0.0 {
         refs.select_nth_unstable_by(mid, |a, b| {
-            (a.lo[axis] + a.hi[axis])
-                .total_cmp(&(b.lo[axis] + b.hi[axis]))
+            // `hi` holds -hi: `lo - (-hi)` is `lo + hi`.
+            (a.lo[axis] - a.hi[axis])
+                .total_cmp(&(b.lo[axis] - b.hi[axis]))
                 .then(a.id.cmp(&b.id))
         });
     }
@@ -1098,11 +1107,45 @@ pub fn build(
         max_leaf: max_leaf.clamp(4, crate::layout::MAX_LEAF_SIZE),
         traversal_cost,
     };
-    let info = RangeInfo::of(refs);
+    let info = enter(refs);
     let mut out = NodeList::new(nodes);
     let aux = &mut aux[..refs.len()];
     let root = build_child(refs, aux, At::Refs, 0, info, &ctx, 0, &mut out);
+    leave(refs);
     out.tree(Some(root))
+}
+
+/// Negates the references' `hi`, as the builder holds them ([`Box8`]), and returns their info.
+fn enter(refs: &mut [PrimRef]) -> RangeInfo {
+    fn chunk(refs: &mut [PrimRef]) -> RangeInfo {
+        let mut acc = Acc::EMPTY;
+        for r in refs {
+            *r = Box8(f32x8::new(bytemuck::cast(*r)) ^ NEG_HI).prim_ref();
+            acc.add(r);
+        }
+        acc.info()
+    }
+    if refs.len() > PARALLEL_THRESHOLD * 4 {
+        return refs
+            .par_chunks_mut(PARALLEL_THRESHOLD)
+            .map(chunk)
+            .reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
+    }
+    chunk(refs)
+}
+
+/// Restores the references' `hi` on return.
+fn leave(refs: &mut [PrimRef]) {
+    fn chunk(refs: &mut [PrimRef]) {
+        for r in refs {
+            *r = bytemuck::cast(Box8::of(r).0 ^ NEG_HI);
+        }
+    }
+    if refs.len() > PARALLEL_THRESHOLD * 4 {
+        refs.par_chunks_mut(PARALLEL_THRESHOLD).for_each(chunk);
+    } else {
+        chunk(refs);
+    }
 }
 
 /// A leaf over the `n` primitives from position `base`.
