@@ -284,16 +284,18 @@ impl Binner {
         }
     }
     /// The bins on each axis of two boxes' doubled centroids, as byte offsets into a [`Bins`]
-    /// axis (`bin << 5`, before masking): the first box's in lanes 0 to 2, the second's in
-    /// lanes 4 to 6.
+    /// axis of `N` bins (`bin << 5`, masked into range: as a vector, so that the compiler
+    /// knows the lanes' range and masks no index again): the first box's in lanes 0 to 2, the
+    /// second's in lanes 4 to 6.
     #[inline(always)]
-    fn offsets2(&self, b0: &Box8, b1: &Box8) -> [u32; 8] {
+    fn offsets2<const N: usize>(&self, b0: &Box8, b1: &Box8) -> [u32; 8] {
         let (lo0, neg_hi0) = b0.halves();
         let (lo1, neg_hi1) = b1.halves();
         let lo: f32x8 = bytemuck::cast([lo0, lo1]);
         let neg_hi: f32x8 = bytemuck::cast([neg_hi0, neg_hi1]);
         // The centroids as `Box8::center2` computes them.
-        bytemuck::cast(((lo - neg_hi - self.lo) * self.scale).fast_trunc_int() << 5)
+        let bins = ((lo - neg_hi - self.lo) * self.scale).fast_trunc_int();
+        bytemuck::cast((bins << 5) & i32x8::splat(((N - 1) << 5) as i32))
     }
     /// The least centroid on `axis` whose bin is `bin` or more, given that the range's
     /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
@@ -395,20 +397,20 @@ impl<const N: usize> Bins<N> {
             let rest = pairs.remainder();
             for p in pairs {
                 let (b0, b1) = (Box8::of(&p[0]), Box8::of(&p[1]));
-                let at = binner.offsets2(&b0, &b1);
+                let at = binner.offsets2::<N>(&b0, &b1);
                 self.add(&at[..4], &b0);
                 other.add(&at[4..], &b1);
             }
             for r in rest {
                 let b = Box8::of(r);
-                self.add(&binner.offsets2(&b, &b), &b);
+                self.add(&binner.offsets2::<N>(&b, &b), &b);
             }
             self.merge_from(&other);
             return;
         }
         for r in refs {
             let b = Box8::of(r);
-            self.add(&binner.offsets2(&b, &b), &b);
+            self.add(&binner.offsets2::<N>(&b, &b), &b);
         }
     }
     /// Adds the bins of `b`, filled from the primitives after (or between) this one's.
