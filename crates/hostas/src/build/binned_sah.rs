@@ -903,14 +903,21 @@ impl Orders {
 
 /// Exact SAH split of a small range (2 to [`SMALL`] primitives, the part `left`) given its
 /// orders: sweep every position on every axis, then permute the references once, for the
-/// winning axis. Makes `left` and `right` the sides, with their orders, and returns the SAH
-/// numerator of the split. The sides' infos carry bounds only (see [`RangeInfo::centroids`]).
-fn sweep_split(refs: &mut [PrimRef], orders: &Orders, left: &mut Part, right: &mut Part) -> f32 {
+/// winning axis. Makes `left` and `right` the sides, with their orders when `split_again`
+/// (the node may split them), and returns the SAH numerator of the split. The sides' infos
+/// carry bounds only (see [`RangeInfo::centroids`]).
+fn sweep_split(
+    refs: &mut [PrimRef],
+    orders: &Orders,
+    left: &mut Part,
+    right: &mut Part,
+    split_again: bool,
+) -> f32 {
     // Most swept ranges have 8 or fewer primitives: half-size working arrays for them.
     if refs.len() <= 8 {
-        sweep::<8>(refs, orders, left, right)
+        sweep::<8>(refs, orders, left, right, split_again)
     } else {
-        sweep::<SMALL>(refs, orders, left, right)
+        sweep::<SMALL>(refs, orders, left, right, split_again)
     }
 }
 
@@ -923,6 +930,7 @@ fn sweep<const L: usize>(
     orders: &Orders,
     left: &mut Part,
     right: &mut Part,
+    split_again: bool,
 ) -> f32 {
     let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
@@ -988,8 +996,9 @@ fn sweep<const L: usize>(
     // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
     let (mut lo, mut ro) = ([identity; 3], [identity; 3]);
-    // Sides of one or two primitives are never swept (see `split`): they need no orders.
-    let neither = best_mid <= 2 && n - best_mid <= 2;
+    // Sides of one or two primitives are never swept (see `split`): they need no orders, and
+    // neither do the sides of a node's last split.
+    let neither = !split_again || (best_mid <= 2 && n - best_mid <= 2);
     for k in 0..3 {
         if k == best_axis || neither {
             continue;
@@ -1043,10 +1052,12 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
 }
 
 /// Splits the part `left` (a range at `at` with at least two primitives, its orders there
-/// when a sweep split made it) into itself and `right`; small ranges' sides get their orders.
+/// when a sweep split made it) into itself and `right`; small ranges' sides get their orders
+/// when `split_again` (the node may split them: its last split's sides it never does).
 /// Returns the split's SAH numerator and where both sides are.
 // Inlined into `build_node`: the sides then reach the parts without going through a return
 // slot.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn split(
     refs: &mut [PrimRef],
@@ -1056,6 +1067,7 @@ fn split(
     right: &mut Part,
     ctx: &Ctx,
     depth: u32,
+    split_again: bool,
 ) -> (f32, At) {
     let whole = |s: Split, left: &mut Part, right: &mut Part| {
         left.split_into(right, s.mid, (s.left, s.right), (None, None));
@@ -1081,7 +1093,8 @@ fn split(
             Some(o) => *o,
             None => Orders::of(refs),
         };
-        return (sweep_split(refs, &orders, left, right), At::Refs);
+        let cost = sweep_split(refs, &orders, left, right, split_again);
+        return (cost, At::Refs);
     }
     let (s, at) = binned_split(refs, aux, at, &left.info, ctx);
     match s {
@@ -1213,7 +1226,7 @@ fn build_node<const LARGE: bool>(
     };
     let (first_cost, first_at) = {
         let (l, r) = parts.split_at_mut(1);
-        split(refs, aux, at, &mut l[0], &mut r[0], ctx, depth)
+        split(refs, aux, at, &mut l[0], &mut r[0], ctx, depth, true)
     };
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
@@ -1271,6 +1284,7 @@ fn build_node<const LARGE: bool>(
             right,
             ctx,
             depth,
+            count + 1 < WIDTH,
         );
         (ats[i], ats[count]) = (s_at, s_at);
         areas[i] = area(left);
@@ -1480,7 +1494,7 @@ mod tests {
                 let orders = Orders::of(&refs);
                 let (mut left, mut right) = (Part::EMPTY, Part::EMPTY);
                 left.end = n;
-                sweep_split(&mut refs, &orders, &mut left, &mut right);
+                sweep_split(&mut refs, &orders, &mut left, &mut right, true);
                 let mid = left.end;
                 assert!(mid > 0 && mid < n && (right.begin, right.end) == (mid, n));
                 for (side, part) in [(&refs[..mid], left), (&refs[mid..], right)] {
