@@ -4,6 +4,10 @@
 //! the final order is the order of `refs` on return. Small ranges are split with an exact SAH
 //! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
 //! sweep split hands its sides their orders.
+//!
+//! While the builder runs, each reference holds its bounds as `(lo, -hi)` ([`Box8`]): negated
+//! once on entry (with the pass that bounds the root) and restored on return, instead of on
+//! every binning, partition and sweep that reads it.
 
 use super::tree::{self, Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};
@@ -28,14 +32,15 @@ struct Box8(f32x8);
 impl Box8 {
     const EMPTY: Box8 = Box8(f32x8::new([f32::INFINITY; 8]));
 
+    /// The box of a reference as the builder holds it (`hi` negated, see [`enter`]).
     #[inline(always)]
     fn of(r: &PrimRef) -> Box8 {
-        Box8(f32x8::new(bytemuck::cast(*r)) ^ NEG_HI)
+        Box8(bytemuck::cast(*r))
     }
     /// The reference this box was made from by [`Box8::of`].
     #[inline(always)]
     fn prim_ref(&self) -> PrimRef {
-        bytemuck::cast(self.0 ^ NEG_HI)
+        bytemuck::cast(self.0)
     }
     /// Grows to hold `o`: `minps` with the operand order of `fmin`/`fmax` (a NaN in `o`
     /// wins over the current bound).
@@ -96,11 +101,12 @@ fn half_areas3(b: &[Box8; 3]) -> f32x4 {
     x * y + y * z + z * x
 }
 
-/// The doubled centroid of a reference (lane 3 is meaningless).
+/// The doubled centroid of a reference (lane 3 is meaningless): `lo - (-hi)`, the same bits
+/// as `lo + hi`.
 #[inline(always)]
 fn center2(r: &PrimRef) -> f32x4 {
-    let [lo, hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
-    f32x4::new(lo) + f32x4::new(hi)
+    let [lo, neg_hi]: [[f32; 4]; 2] = bytemuck::cast(*r);
+    f32x4::new(lo) - f32x4::new(neg_hi)
 }
 
 /// Bounds of a range and of its primitives' (doubled) centroids.
@@ -278,16 +284,18 @@ impl Binner {
         }
     }
     /// The bins on each axis of two boxes' doubled centroids, as byte offsets into a [`Bins`]
-    /// axis (`bin << 5`, before masking): the first box's in lanes 0 to 2, the second's in
-    /// lanes 4 to 6.
+    /// axis of `N` bins (`bin << 5`, masked into range: as a vector, so that the compiler
+    /// knows the lanes' range and masks no index again): the first box's in lanes 0 to 2, the
+    /// second's in lanes 4 to 6.
     #[inline(always)]
-    fn offsets2(&self, b0: &Box8, b1: &Box8) -> [u32; 8] {
+    fn offsets2<const N: usize>(&self, b0: &Box8, b1: &Box8) -> [u32; 8] {
         let (lo0, neg_hi0) = b0.halves();
         let (lo1, neg_hi1) = b1.halves();
         let lo: f32x8 = bytemuck::cast([lo0, lo1]);
         let neg_hi: f32x8 = bytemuck::cast([neg_hi0, neg_hi1]);
         // The centroids as `Box8::center2` computes them.
-        bytemuck::cast(((lo - neg_hi - self.lo) * self.scale).fast_trunc_int() << 5)
+        let bins = ((lo - neg_hi - self.lo) * self.scale).fast_trunc_int();
+        bytemuck::cast((bins << 5) & i32x8::splat(((N - 1) << 5) as i32))
     }
     /// The least centroid on `axis` whose bin is `bin` or more, given that the range's
     /// centroids on `axis` span `lo..=hi` and some lie in bins from `bin` up (`0 < bin`).
@@ -389,20 +397,20 @@ impl<const N: usize> Bins<N> {
             let rest = pairs.remainder();
             for p in pairs {
                 let (b0, b1) = (Box8::of(&p[0]), Box8::of(&p[1]));
-                let at = binner.offsets2(&b0, &b1);
+                let at = binner.offsets2::<N>(&b0, &b1);
                 self.add(&at[..4], &b0);
                 other.add(&at[4..], &b1);
             }
             for r in rest {
                 let b = Box8::of(r);
-                self.add(&binner.offsets2(&b, &b), &b);
+                self.add(&binner.offsets2::<N>(&b, &b), &b);
             }
             self.merge_from(&other);
             return;
         }
         for r in refs {
             let b = Box8::of(r);
-            self.add(&binner.offsets2(&b, &b), &b);
+            self.add(&binner.offsets2::<N>(&b, &b), &b);
         }
     }
     /// Adds the bins of `b`, filled from the primitives after (or between) this one's.
@@ -522,15 +530,16 @@ impl<const A: usize> Plane<A> {
     fn new(t: f32) -> Plane<A> {
         Plane { t: f32x8::splat(t) }
     }
-    /// A reference as one vector, its doubled centroid in both halves and the mask of the
-    /// side it goes to: all lanes set when right of the plane, none when left.
+    /// A reference as one vector, its doubled centroid `c` as the point `(c, -c)` (`lo - (-hi)`
+    /// and `-hi - lo`) and the mask of the side it goes to: all lanes set when right of the
+    /// plane, none when left.
     #[inline(always)]
     fn classify(&self, r: &PrimRef) -> (f32x8, f32x8, f32x8) {
         let v: f32x8 = bytemuck::cast(*r);
-        let [lo, hi]: [f32x4; 2] = bytemuck::cast(v);
-        let c2: f32x8 = v + f32x8::from(bytemuck::cast::<_, [f32; 8]>([hi, lo]));
-        let right = f32x8::splat(c2.to_array()[A]).simd_ge(self.t);
-        (v, c2, right)
+        let [lo, neg_hi]: [f32x4; 2] = bytemuck::cast(v);
+        let p: f32x8 = v - f32x8::from(bytemuck::cast::<_, [f32; 8]>([neg_hi, lo]));
+        let right = f32x8::splat(p.to_array()[A]).simd_ge(self.t);
+        (v, p, right)
     }
     #[inline(always)]
     fn left_of(&self, r: &PrimRef) -> bool {
@@ -560,10 +569,11 @@ impl SideBounds {
         left: Box8::EMPTY,
         right: Box8::EMPTY,
     };
-    /// Grows the side of `right` by the centroid given in both halves.
+    /// Grows the side of `right` by the centroid given as `(c, -c)`. (Where `lo + hi` is +0,
+    /// `-hi - lo` may be +0 too: a centroid bound's sign of zero, which changes no bin, no
+    /// threshold and no median split.)
     #[inline(always)]
-    fn grow(&mut self, c2: f32x8, right: f32x8) {
-        let p = c2 ^ NEG_HI;
+    fn grow(&mut self, p: f32x8, right: f32x8) {
         self.left.grow_point(p | right);
         self.right
             .grow_point(right.select(p, f32x8::splat(f32::NAN)));
@@ -642,8 +652,8 @@ fn parallel_partition<const A: usize>(
             let mut sides = SideBounds::EMPTY;
             let (mut li, mut ri) = (0, 0);
             for r in c {
-                let (_, c2, right) = plane.classify(r);
-                sides.grow(c2, right);
+                let (_, p, right) = plane.classify(r);
+                sides.grow(p, right);
                 if right.to_bitmask() == 0 {
                     lp[li] = *r;
                     li += 1;
@@ -676,8 +686,8 @@ fn stable_partition<const A: usize>(
     let mut sides = SideBounds::EMPTY;
     let (mut li, mut ri) = (0, left);
     for r in src {
-        let (v, c2, right) = plane.classify(r);
-        sides.grow(c2, right);
+        let (v, p, right) = plane.classify(r);
+        sides.grow(p, right);
         // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
         let right_lane = mask_lane(right);
         let at = if right_lane == 0 { li } else { ri };
@@ -710,8 +720,8 @@ fn partition<const A: usize, const FROM_AUX: bool>(
     let mut i = 0usize;
     for j in 0..refs.len() {
         let r = if FROM_AUX { &aux[j] } else { &refs[j] };
-        let (v, c2, right) = plane.classify(r);
-        sides.grow(c2, right);
+        let (v, p, right) = plane.classify(r);
+        sides.grow(p, right);
         // Refs i..j are right ones: swapping j with i keeps that whichever side `r` is on.
         refs[j] = refs[i];
         refs[i] = bytemuck::cast(v);
@@ -893,14 +903,21 @@ impl Orders {
 
 /// Exact SAH split of a small range (2 to [`SMALL`] primitives, the part `left`) given its
 /// orders: sweep every position on every axis, then permute the references once, for the
-/// winning axis. Makes `left` and `right` the sides, with their orders, and returns the SAH
-/// numerator of the split. The sides' infos carry bounds only (see [`RangeInfo::centroids`]).
-fn sweep_split(refs: &mut [PrimRef], orders: &Orders, left: &mut Part, right: &mut Part) -> f32 {
+/// winning axis. Makes `left` and `right` the sides, with their orders when `split_again`
+/// (the node may split them), and returns the SAH numerator of the split. The sides' infos
+/// carry bounds only (see [`RangeInfo::centroids`]).
+fn sweep_split(
+    refs: &mut [PrimRef],
+    orders: &Orders,
+    left: &mut Part,
+    right: &mut Part,
+    split_again: bool,
+) -> f32 {
     // Most swept ranges have 8 or fewer primitives: half-size working arrays for them.
     if refs.len() <= 8 {
-        sweep::<8>(refs, orders, left, right)
+        sweep::<8>(refs, orders, left, right, split_again)
     } else {
-        sweep::<SMALL>(refs, orders, left, right)
+        sweep::<SMALL>(refs, orders, left, right, split_again)
     }
 }
 
@@ -913,6 +930,7 @@ fn sweep<const L: usize>(
     orders: &Orders,
     left: &mut Part,
     right: &mut Part,
+    split_again: bool,
 ) -> f32 {
     let n = refs.len().min(L);
     // A box carries the whole reference (lanes 3 and 7 hold the id and the pad).
@@ -978,8 +996,9 @@ fn sweep<const L: usize>(
     // On the winning axis the references now are in its order: both sides' are the identity.
     let mid = best_mid as u8;
     let (mut lo, mut ro) = ([identity; 3], [identity; 3]);
-    // Sides of one or two primitives are never swept (see `split`): they need no orders.
-    let neither = best_mid <= 2 && n - best_mid <= 2;
+    // Sides of one or two primitives are never swept (see `split`): they need no orders, and
+    // neither do the sides of a node's last split.
+    let neither = !split_again || (best_mid <= 2 && n - best_mid <= 2);
     for k in 0..3 {
         if k == best_axis || neither {
             continue;
@@ -1018,8 +1037,9 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
         .unwrap_or(0);
     if ext[axis] > 0.0 {
         refs.select_nth_unstable_by(mid, |a, b| {
-            (a.lo[axis] + a.hi[axis])
-                .total_cmp(&(b.lo[axis] + b.hi[axis]))
+            // `hi` holds -hi: `lo - (-hi)` is `lo + hi`.
+            (a.lo[axis] - a.hi[axis])
+                .total_cmp(&(b.lo[axis] - b.hi[axis]))
                 .then(a.id.cmp(&b.id))
         });
     }
@@ -1032,10 +1052,12 @@ fn median_split(refs: &mut [PrimRef], info: &RangeInfo) -> Split {
 }
 
 /// Splits the part `left` (a range at `at` with at least two primitives, its orders there
-/// when a sweep split made it) into itself and `right`; small ranges' sides get their orders.
+/// when a sweep split made it) into itself and `right`; small ranges' sides get their orders
+/// when `split_again` (the node may split them: its last split's sides it never does).
 /// Returns the split's SAH numerator and where both sides are.
 // Inlined into `build_node`: the sides then reach the parts without going through a return
 // slot.
+#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn split(
     refs: &mut [PrimRef],
@@ -1045,6 +1067,7 @@ fn split(
     right: &mut Part,
     ctx: &Ctx,
     depth: u32,
+    split_again: bool,
 ) -> (f32, At) {
     let whole = |s: Split, left: &mut Part, right: &mut Part| {
         left.split_into(right, s.mid, (s.left, s.right), (None, None));
@@ -1070,7 +1093,8 @@ fn split(
             Some(o) => *o,
             None => Orders::of(refs),
         };
-        return (sweep_split(refs, &orders, left, right), At::Refs);
+        let cost = sweep_split(refs, &orders, left, right, split_again);
+        return (cost, At::Refs);
     }
     let (s, at) = binned_split(refs, aux, at, &left.info, ctx);
     match s {
@@ -1098,11 +1122,45 @@ pub fn build(
         max_leaf: max_leaf.clamp(4, crate::layout::MAX_LEAF_SIZE),
         traversal_cost,
     };
-    let info = RangeInfo::of(refs);
+    let info = enter(refs);
     let mut out = NodeList::new(nodes);
     let aux = &mut aux[..refs.len()];
     let root = build_child(refs, aux, At::Refs, 0, info, &ctx, 0, &mut out);
+    leave(refs);
     out.tree(Some(root))
+}
+
+/// Negates the references' `hi`, as the builder holds them ([`Box8`]), and returns their info.
+fn enter(refs: &mut [PrimRef]) -> RangeInfo {
+    fn chunk(refs: &mut [PrimRef]) -> RangeInfo {
+        let mut acc = Acc::EMPTY;
+        for r in refs {
+            *r = Box8(f32x8::new(bytemuck::cast(*r)) ^ NEG_HI).prim_ref();
+            acc.add(r);
+        }
+        acc.info()
+    }
+    if refs.len() > PARALLEL_THRESHOLD * 4 {
+        return refs
+            .par_chunks_mut(PARALLEL_THRESHOLD)
+            .map(chunk)
+            .reduce(|| RangeInfo::EMPTY, RangeInfo::merge);
+    }
+    chunk(refs)
+}
+
+/// Restores the references' `hi` on return.
+fn leave(refs: &mut [PrimRef]) {
+    fn chunk(refs: &mut [PrimRef]) {
+        for r in refs {
+            *r = bytemuck::cast(Box8::of(r).0 ^ NEG_HI);
+        }
+    }
+    if refs.len() > PARALLEL_THRESHOLD * 4 {
+        refs.par_chunks_mut(PARALLEL_THRESHOLD).for_each(chunk);
+    } else {
+        chunk(refs);
+    }
 }
 
 /// A leaf over the `n` primitives from position `base`.
@@ -1168,7 +1226,7 @@ fn build_node<const LARGE: bool>(
     };
     let (first_cost, first_at) = {
         let (l, r) = parts.split_at_mut(1);
-        split(refs, aux, at, &mut l[0], &mut r[0], ctx, depth)
+        split(refs, aux, at, &mut l[0], &mut r[0], ctx, depth, true)
     };
     if n <= ctx.max_leaf {
         let area = info.bounds.half_area();
@@ -1226,6 +1284,7 @@ fn build_node<const LARGE: bool>(
             right,
             ctx,
             depth,
+            count + 1 < WIDTH,
         );
         (ats[i], ats[count]) = (s_at, s_at);
         areas[i] = area(left);
@@ -1435,7 +1494,7 @@ mod tests {
                 let orders = Orders::of(&refs);
                 let (mut left, mut right) = (Part::EMPTY, Part::EMPTY);
                 left.end = n;
-                sweep_split(&mut refs, &orders, &mut left, &mut right);
+                sweep_split(&mut refs, &orders, &mut left, &mut right, true);
                 let mid = left.end;
                 assert!(mid > 0 && mid < n && (right.begin, right.end) == (mid, n));
                 for (side, part) in [(&refs[..mid], left), (&refs[mid..], right)] {

@@ -588,11 +588,10 @@ impl Device {
                 encode::node_section(bytes, &plan)?,
             );
             let header = encode::encode(bytes, &plan, &fields, &records, &tree)?;
-            write_prims(bytes, &header, prim_kind, order, data)?;
-            if index_tris {
-                // The decoded triangles are not needed any more: their scratch holds the
-                // records and vertices while they are made.
-                share_vertices(bytes, &readers, &records, data)?;
+            // Indexed triangles are made from the decoded ones, straight into the structure;
+            // direct ones are written where sharing does not pay.
+            if !(index_tris && share_vertices(bytes, &header, order, &readers, &records, data)?) {
+                write_prims(bytes, &header, prim_kind, order, data)?;
             }
             Ok(())
         })
@@ -1211,13 +1210,17 @@ fn internal(what: &str) -> Error {
     Error::NotSupported(format!("internal: {what}"))
 }
 
-/// Rewrites the built triangles in `bytes` as indexed ones sharing the application's
-/// vertices (same geometry, same vertex index), where that makes the structure smaller.
+/// Writes the ids and the decoded triangles `data` (by sequence number) in the tree's final
+/// order `refs` as indexed triangles sharing the application's vertices (same geometry, same
+/// vertex index), where that makes the structure smaller; returns whether it did (if not,
+/// the primitives are for [`write_prims`] to write).
 fn share_vertices(
     bytes: &mut [u8],
+    h: &Header,
+    refs: &[PrimRef],
     readers: &[Reader],
     records: &[GeometryRecord],
-    scratch: &mut [u8],
+    data: &[u8],
 ) -> Result<bool> {
     // Each indexed geometry's vertex numbers (0..=maxVertex) get keys of their own.
     let mut geometries = Vec::with_capacity(records.len());
@@ -1238,11 +1241,20 @@ fn share_vertices(
     if !layout::indexed::may_pay(bound, triangles) {
         return Ok(false);
     }
+    // The pass reads the ids from the structure, each triangle from `data`.
+    let at = h.prim_ids_offset as usize;
+    let ids: &mut [u32] = bytemuck::try_cast_slice_mut(&mut bytes[at..at + 4 * refs.len()])
+        .map_err(|e| internal(&format!("primitive ids: {e}")))?;
+    for (i, r) in ids.iter_mut().zip(refs) {
+        *i = r.id;
+    }
+    let tris: &[[f32; 9]] = bytemuck::try_cast_slice(&data[..data.len() / TRI_BYTES * TRI_BYTES])
+        .map_err(|e| internal(&format!("triangle records: {e}")))?;
     if let [(_, _, Some(g))] = geometries[..] {
         // One geometry (the common case) needs no lookup, and its vertex numbers are its
         // keys: those past `maxVertex` are past `key_count`.
         let keys = |ids: &[u32], out: &mut [[u32; 3]]| g.triangles(ids, out);
-        return layout::indexed::share_vertices(bytes, keys, key_count, scratch);
+        return layout::indexed::share_vertices(bytes, tris, keys, key_count);
     }
     // Keys fit a `u32` (share_vertices checks `key_count`).
     let key = |id: u32| {
@@ -1257,7 +1269,7 @@ fn share_vertices(
             *out = key(id).unwrap_or([u32::MAX; 3]);
         }
     };
-    layout::indexed::share_vertices(bytes, keys, key_count, scratch)
+    layout::indexed::share_vertices(bytes, tris, keys, key_count)
 }
 
 /// Writes the primitive sections in the tree's final order.

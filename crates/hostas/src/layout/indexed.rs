@@ -33,17 +33,19 @@ pub fn may_pay(vertices: u64, triangles: u64) -> bool {
 /// Triangles whose keys are made at a time (their keys stay in the L1 cache).
 const CHUNK: usize = 256;
 
-/// Rewrites the direct triangles of the structure in `bytes` (header, ids and nodes written)
-/// as indexed ones when that is smaller. `keys(ids, out)` writes the vertex keys of the
-/// triangles with primitive sequence numbers `ids`: below `key_count` and equal exactly where
-/// two vertices are the application's same vertex; a triangle with a key at or past it
-/// shares nothing. `scratch` holds the records and vertices while the triangles are read
-/// (36 bytes per stored triangle suffice). Returns whether the structure is now indexed.
+/// Writes the triangles of the structure in `bytes` (header, ids and nodes written, the
+/// triangle section not) as indexed ones when that is smaller. `triangles` holds every
+/// triangle by primitive sequence number (the decoded scratch), so nothing is read back from
+/// the structure: records and vertices go straight into its triangle section.
+/// `keys(ids, out)` writes the vertex keys of the triangles with sequence numbers `ids`: below
+/// `key_count` and equal exactly where two vertices are the application's same vertex; a
+/// triangle with a key at or past it shares nothing. Returns whether the structure is now
+/// indexed; if not, the caller writes the direct triangles (their section may hold records).
 pub fn share_vertices(
     bytes: &mut [u8],
+    triangles: &[[f32; 9]],
     mut keys: impl FnMut(&[u32], &mut [[u32; 3]]),
     key_count: u64,
-    scratch: &mut [u8],
 ) -> Result<bool> {
     let header: Header = bytemuck::pod_read_unaligned(
         bytes
@@ -58,17 +60,15 @@ pub fn share_vertices(
     }
     let tris_at = header.prims_offset as usize;
     let ids_at = header.prim_ids_offset as usize;
-    let triangles: &[[f32; 9]] = cast(bytes.get(tris_at..tris_at + 36 * stored))?;
-    let ids: &[u32] = cast(bytes.get(ids_at..ids_at + 4 * stored))?;
-
-    // Records first, then vertices, in scratch: at most as many bytes as the direct triangles.
-    let (records, vertices) = scratch
-        .get_mut(..36 * stored)
-        .ok_or_else(|| internal("scratch too small"))?
-        .split_at_mut(8 * stored);
-    let records: &mut [TriRecord] = cast_mut(Some(records))?;
-    let room = vertices.len() / 12 * 12;
-    let vertices: &mut [f32] = cast_mut(vertices.get_mut(..room))?;
+    // Records first, then vertices (each section aligned), up to the ids, and never more
+    // vertices than 28 bytes per triangle hold (the room the direct triangles would free).
+    let vertices_at = align_up((tris_at + 8 * stored) as u64, SECTION_ALIGN) as usize;
+    let room = (28 * stored / 12).min(ids_at.saturating_sub(vertices_at) / 12);
+    let (head, tail) = split(bytes, ids_at)?;
+    let (head, vertices) = split(head, vertices_at)?;
+    let ids: &[u32] = cast(tail.get(..4 * stored))?;
+    let records: &mut [TriRecord] = cast_mut(head.get_mut(tris_at..tris_at + 8 * stored))?;
+    let vertices: &mut [f32] = cast_mut(vertices.get_mut(..12 * room))?;
     // Count stays below FAR (at most three vertices per triangle), so `count - FAR` wraps to
     // more than WINDOW: one unsigned compare tells a vertex numbered within the window.
     if 3 * stored as u64 >= FAR as u64 {
@@ -77,15 +77,21 @@ pub fn share_vertices(
     let mut map = vec![FAR; key_count as usize];
     let mut count = 0u32;
     let mut chunk_keys = [[0u32; 3]; CHUNK];
-    for ((triangles, records), ids) in triangles
-        .chunks(CHUNK)
-        .zip(records.chunks_mut(CHUNK))
-        .zip(ids.chunks(CHUNK))
-    {
+    for (records, ids) in records.chunks_mut(CHUNK).zip(ids.chunks(CHUNK)) {
+        // The triangles are read at random (mostly from memory): all are asked for first
+        // (both lines a triangle may straddle), so that their misses overlap the keys'.
+        for &id in ids {
+            if let Some(t) = triangles.get(id as usize) {
+                crate::math::prefetch(&t[0]);
+                crate::math::prefetch(&t[8]);
+            }
+        }
         let chunk_keys = &mut chunk_keys[..ids.len()];
         keys(ids, chunk_keys);
-        let Some(c) = share_chunk(&mut map, vertices, count, triangles, chunk_keys, records) else {
-            // No room left: sharing does not pay, and the direct triangles stay.
+        let Some(c) = share_chunk(
+            &mut map, vertices, count, triangles, ids, chunk_keys, records,
+        ) else {
+            // No room left (or an id without a triangle): sharing does not pay.
             return Ok(false);
         };
         count = c;
@@ -94,7 +100,6 @@ pub fn share_vertices(
 
     // The new sections, each aligned, below the old ones (checked: else keep direct).
     let vertex_count = count as usize;
-    let vertices_at = align_up((tris_at + 8 * stored) as u64, SECTION_ALIGN) as usize;
     let new_ids_at = align_up((vertices_at + 12 * vertex_count) as u64, SECTION_ALIGN) as usize;
     let new_nodes_at = align_up((new_ids_at + 4 * stored) as u64, SECTION_ALIGN) as usize;
     let nodes_at = header.nodes_offset as usize;
@@ -104,14 +109,10 @@ pub fn share_vertices(
     }
     bytes.copy_within(ids_at..ids_at + 4 * stored, new_ids_at);
     bytes.copy_within(nodes_at..nodes_at + node_bytes, new_nodes_at);
-    let records: &[u8] = bytemuck::cast_slice(&records[..]);
-    bytes[tris_at..tris_at + records.len()].copy_from_slice(records);
-    let vertices: &[u8] = bytemuck::cast_slice(&vertices[..3 * vertex_count]);
-    bytes[vertices_at..vertices_at + vertices.len()].copy_from_slice(vertices);
     // The alignment gaps, so the bytes do not depend on what the memory held.
     for (start, end) in [
-        (tris_at + records.len(), vertices_at),
-        (vertices_at + vertices.len(), new_ids_at),
+        (tris_at + 8 * stored, vertices_at),
+        (vertices_at + 12 * vertex_count, new_ids_at),
         (new_ids_at + 4 * stored, new_nodes_at),
     ] {
         bytes[start..end].fill(0);
@@ -129,18 +130,20 @@ pub fn share_vertices(
     Ok(true)
 }
 
-/// Numbers the vertices of `triangles` (`keys` theirs) from `count` on, writing their records
-/// and new vertices (three floats each); returns the new count, or `None` when `vertices` has
-/// no room for them.
+/// Numbers the vertices of the triangles `ids` (`keys` theirs) from `count` on, writing their
+/// records and new vertices (three floats each); returns the new count, or `None` when
+/// `vertices` has no room for them.
 fn share_chunk(
     map: &mut [u32],
     vertices: &mut [f32],
     mut count: u32,
     triangles: &[[f32; 9]],
+    ids: &[u32],
     keys: &[[u32; 3]],
     records: &mut [TriRecord],
 ) -> Option<u32> {
-    for ((tri, key), record) in triangles.iter().zip(keys).zip(records) {
+    for ((&id, key), record) in ids.iter().zip(keys).zip(records) {
+        let tri = triangles.get(id as usize)?;
         let mut number = [0u32; 3];
         let at = 3 * count as usize;
         let slots: Option<&mut [f32; 9]> =
@@ -215,6 +218,11 @@ fn number_one_by_one(
 
 fn internal(what: &str) -> Error {
     Error::OutOfHostMemory(format!("indexing triangles: {what}"))
+}
+
+fn split(b: &mut [u8], at: usize) -> Result<(&mut [u8], &mut [u8])> {
+    b.split_at_mut_checked(at)
+        .ok_or_else(|| internal("section out of range"))
 }
 
 fn cast<T: bytemuck::Pod>(b: Option<&[u8]>) -> Result<&[T]> {
