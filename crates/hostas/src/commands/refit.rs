@@ -6,8 +6,10 @@
 //! straight from the application's bytes into the stored primitive section while computing
 //! the leaf's box, and each node's boxes are set once its children are done; large subtrees
 //! run in parallel. For one triangle geometry on one thread (and for scattered ones on a few)
-//! the stored triangles are instead rewritten in primitive order first, reading the
-//! application's buffers in sequence, and the walk then only computes the boxes. It relies on
+//! the stored triangles are instead rewritten first, and the walk then only computes the
+//! boxes: in primitive order (the application's buffers read in sequence, the stored
+//! triangles written where the ids say), or, for large meshes on one thread, in stored order
+//! (each triangle gathered by id, its indices and vertices requested well ahead). It relies on
 //! the layout the encoder writes (nodes in depth-first preorder, primitives in leaf order) and
 //! checks it as it goes. Anything it does not expect (an invalid primitive, an unusual layout)
 //! makes it give up, and the general path below redoes the whole update from the start: it
@@ -24,7 +26,7 @@ use crate::layout::{
     EMPTY_CHILD, GEOMETRY_RECORD_SIZE, GeometryRecord, Header, InstanceRecord, LEAF_BIT, MAX_DEPTH,
     MAX_LEAF_SIZE, NODE_SIZE, Node, PrimKind, WIDTH,
 };
-use crate::math::{Aabb, Box4, fmax4, fmin4, prefetch_for_write};
+use crate::math::{Aabb, Box4, fmax4, fmin4, prefetch, prefetch_for_write};
 use rayon::prelude::*;
 use wide::f32x4;
 
@@ -258,6 +260,8 @@ trait Indices: Sync + Copy {
     fn triple(&self, p: usize) -> Option<[usize; 3]>;
     /// Every triangle's vertex indices, in order.
     fn triples(&self) -> impl Iterator<Item = [usize; 3]>;
+    /// Asks the caches for triangle `p`'s indices (nothing past the range).
+    fn prefetch(&self, p: usize);
 }
 
 /// No index buffer: triangle `p` is vertices `3p`, `3p + 1`, `3p + 2`.
@@ -277,6 +281,8 @@ impl Indices for NoIndices {
     fn triples(&self) -> impl Iterator<Item = [usize; 3]> {
         (0..self.0).map(|p| [3 * p, 3 * p + 1, 3 * p + 2])
     }
+    #[inline(always)]
+    fn prefetch(&self, _: usize) {}
 }
 
 /// `u16` or `u32` indices: `N`-byte records (6 or 12) of three little-endian values.
@@ -295,6 +301,12 @@ impl<const N: usize> Indices for IndexRecords<'_, N> {
     #[inline(always)]
     fn triples(&self) -> impl Iterator<Item = [usize; 3]> {
         self.0.iter().map(Self::decode)
+    }
+    #[inline(always)]
+    fn prefetch(&self, p: usize) {
+        if let Some(r) = self.0.get(p) {
+            prefetch(r);
+        }
     }
 }
 
@@ -315,6 +327,9 @@ impl<const N: usize> IndexRecords<'_, N> {
 trait Vertices: Sync + Copy {
     /// Vertex `v`; `None` past maxVertex.
     fn get(&self, v: usize) -> Option<[f32; 3]>;
+
+    /// Asks the caches for vertex `v` (nothing past maxVertex).
+    fn prefetch(&self, v: usize);
 
     /// Vertex `v`; NaNs past maxVertex.
     #[inline(always)]
@@ -346,6 +361,12 @@ impl Vertices for Packed<'_> {
     fn get(&self, v: usize) -> Option<[f32; 3]> {
         self.0.get(v).map(vec3)
     }
+    #[inline(always)]
+    fn prefetch(&self, v: usize) {
+        if let Some(x) = self.0.get(v) {
+            prefetch(x);
+        }
+    }
 }
 
 impl Vertices for Strided<'_> {
@@ -358,6 +379,14 @@ impl Vertices for Strided<'_> {
         Some(vec3(
             self.data.get(at..at.wrapping_add(12))?.try_into().ok()?,
         ))
+    }
+    #[inline(always)]
+    fn prefetch(&self, v: usize) {
+        if v <= self.last
+            && let Some(x) = self.data.get(v.wrapping_mul(self.stride))
+        {
+            prefetch(x);
+        }
     }
 }
 
@@ -647,43 +676,58 @@ fn fused(
 
 /// Refits one fast-decoded triangle geometry: on one thread (or on a few, when the leaves'
 /// primitives are scattered over the application's buffers, as in a triangle soup) by
-/// rewriting the stored triangles in primitive order first, then computing the boxes from
-/// them; on more threads in one pass over the tree, subtrees in parallel.
+/// rewriting the stored triangles first, then computing the boxes from them; on more threads
+/// in one pass over the tree, subtrees in parallel. On one thread, a large structure whose
+/// stored order follows the application's (a mesh) has its triangles rewritten in stored order
+/// (gathered by id); any other in primitive order (scattered to their slots).
 fn refit_triangles<I: Indices, V: Vertices>(
     tree: Tree<'_, [f32; 9]>,
     d: TriF32<I, V>,
     scratch: &mut [u8],
 ) -> Option<Aabb> {
-    // The pass in primitive order is sequential; the tree walk in leaf order scales with
-    // threads (each waits on its own cache misses). On one thread the first reads the
-    // application's buffers in sequence and was faster on every scene measured (1M soup about
-    // 2x, 1M random boxes 1.5x, meshes 1.05-1.15x); on two it is about four times as fast on a
-    // 1M soup; from 8 threads on the walk should win (estimated from its speed per thread,
-    // not measured).
+    // The passes before the walk are sequential; the tree walk in leaf order scales with
+    // threads (each waits on its own cache misses). On one thread the pass in primitive order
+    // reads the application's buffers in sequence and was faster than the walk on every scene
+    // measured (1M soup about 2x, 1M random boxes 1.5x, meshes 1.05-1.15x); on two it is
+    // about four times as fast on a 1M soup; from 8 threads on the walk should win
+    // (estimated from its speed per thread, not measured).
     let threads = rayon::current_num_threads();
-    if threads >= 8 || (threads > 1 && !scattered(tree.ids)) {
+    let scattered = scattered(tree.ids);
+    if threads >= 8 || (threads > 1 && !scattered) {
         return tree.refit(&d);
     }
     let Tree { ids, nodes, prims } = tree;
-    // The stored slot of each primitive, in scratch (4 bytes per primitive, aligned).
-    let skip = scratch.as_ptr().align_offset(4).min(scratch.len());
-    let slot_bytes = scratch.get_mut(skip..skip + 4 * d.index.len())?;
-    let slot: &mut [u32] = bytemuck::try_cast_slice_mut(slot_bytes).ok()?;
-    // On the VM: 1M soup +10%, 1M boxes and sphere +25%; the bunny (69k) 10% slower.
-    if prims.len() >= PREFETCH_MIN_PRIMS {
-        // The slots only where consecutive stored triangles are often far apart in primitive
-        // order (a soup, the boxes); in a mesh the slots written last are still in the
-        // caches (the 1M sphere: 6% fewer instructions, no slower).
-        let far_slots = 16 * far_pairs(ids, 1 << 14) > SAMPLES;
-        in_primitive_order::<I, V, true>(&d, ids, prims, slot, far_slots)?;
+    if prims.len() >= GATHER_MIN_PRIMS && !scattered {
+        // On the VM, against the pass in primitive order: 1M boxes 1.1-1.4x, sphere 1.15-1.2x
+        // (no slots to fill and read, the stored triangles written in sequence); a 1M soup,
+        // whose gathers each miss the caches, 0.6x; the conference room (331k, most of it
+        // in the caches, where the prefetches only add instructions) 0.94x.
+        in_stored_order(&d, ids, prims)?;
     } else {
-        in_primitive_order::<I, V, false>(&d, ids, prims, slot, false)?;
+        // The stored slot of each primitive, in scratch (4 bytes per primitive, aligned).
+        let skip = scratch.as_ptr().align_offset(4).min(scratch.len());
+        let slot_bytes = scratch.get_mut(skip..skip + 4 * d.index.len())?;
+        let slot: &mut [u32] = bytemuck::try_cast_slice_mut(slot_bytes).ok()?;
+        // On the VM: 1M soup +10%, 1M boxes and sphere +25%; the bunny (69k) 10% slower.
+        if prims.len() >= PREFETCH_MIN_PRIMS {
+            // The slots only where consecutive stored triangles are often far apart in
+            // primitive order (a soup); in a mesh the slots written last are still in the
+            // caches (the 1M sphere: 6% fewer instructions, no slower).
+            let far_slots = 16 * far_pairs(ids, 1 << 14) > SAMPLES;
+            in_primitive_order::<I, V, true>(&d, ids, prims, slot, far_slots)?;
+        } else {
+            in_primitive_order::<I, V, false>(&d, ids, prims, slot, false)?;
+        }
     }
     Tree { ids, nodes, prims }.refit(&Written)
 }
 
 /// From this many stored triangles (9 MiB of them) the pass in primitive order prefetches.
 const PREFETCH_MIN_PRIMS: usize = 1 << 18;
+
+/// From this many stored triangles (18 MiB of them), unless scattered, they are rewritten in
+/// stored order.
+const GATHER_MIN_PRIMS: usize = 1 << 19;
 
 /// Whether consecutive stored primitives are mostly far apart in primitive order (sampled).
 fn scattered(ids: &[u32]) -> bool {
@@ -771,6 +815,49 @@ fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
     (slot.len() - empty == ids.len()).then_some(())
 }
 
+/// Rewrites the stored triangles (`prims`, ids `ids`) in stored order, each gathered from the
+/// application's buffers by id. `None` if any triangle is not valid.
+// (Not inlined, as `in_primitive_order`.)
+#[inline(never)]
+fn in_stored_order<I: Indices, V: Vertices>(
+    d: &TriF32<I, V>,
+    ids: &[u32],
+    prims: &mut [[f32; 9]],
+) -> Option<()> {
+    // The reads are scattered and the ids known in advance: the indices of the triangle
+    // `INDEX_AHEAD` iterations on are requested, and the vertices of the one `VERTS_AHEAD` on,
+    // whose indices were requested long enough before to be in the caches by now. (On the VM,
+    // 1M boxes against the pass in primitive order: 32 and 16 ahead 0.93x, 64 and 32 1.17x,
+    // 128 and 64 1.13-1.4x, 256 and 128 no better; all three vertices, not only one or two.)
+    const INDEX_AHEAD: usize = 128;
+    const VERTS_AHEAD: usize = 64;
+    // (A copy, so that the compiler keeps the fields in registers.)
+    let d = *d;
+    let local = |id: u32| id.wrapping_sub(d.first) as usize;
+    let head = ids.len().saturating_sub(INDEX_AHEAD);
+    let (prims_head, prims_tail) = prims.split_at_mut(head.min(prims.len()));
+    let index_ahead = ids.get(INDEX_AHEAD..).unwrap_or(&[]);
+    let verts_ahead = ids.get(VERTS_AHEAD..).unwrap_or(&[]);
+    for (((o, &id), &v), &i) in prims_head
+        .iter_mut()
+        .zip(ids)
+        .zip(verts_ahead)
+        .zip(index_ahead)
+    {
+        d.index.prefetch(local(i));
+        if let Some(t) = d.index.triple(local(v)) {
+            d.verts.prefetch(t[0]);
+            d.verts.prefetch(t[1]);
+            d.verts.prefetch(t[2]);
+        }
+        *o = d.valid(d.index.triple(local(id))?)?;
+    }
+    for (o, &id) in prims_tail.iter_mut().zip(&ids[head..]) {
+        *o = d.valid(d.index.triple(local(id))?)?;
+    }
+    Some(())
+}
+
 /// A slot that holds no stored primitive.
 const NONE: u32 = u32::MAX;
 
@@ -779,14 +866,21 @@ impl<I: Indices, V: Vertices> TriF32<I, V> {
     /// (or `s` out of range).
     #[inline(always)]
     fn put(&self, t: [usize; 3], s: u32, prims: &mut [[f32; 9]]) -> Option<()> {
+        let f = self.valid(t)?;
+        *prims.get_mut(s as usize)? = f;
+        Some(())
+    }
+
+    /// The stored form of the triangle with vertices `t`; `None` if it is not valid.
+    #[inline(always)]
+    fn valid(&self, t: [usize; 3]) -> Option<[f32; 9]> {
         let a = self.verts.get(t[0])?;
         let b = self.verts.get(t[1])?;
         let c = self.verts.get(t[2])?;
         if a[0].is_nan() | b[0].is_nan() | c[0].is_nan() {
             return None;
         }
-        *prims.get_mut(s as usize)? = [a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]];
-        Some(())
+        Some([a[0], a[1], a[2], b[0], b[1], b[2], c[0], c[1], c[2]])
     }
 }
 
@@ -1291,6 +1385,50 @@ mod tests {
                 },
                 vk::GeometryFlagsKHR::OPAQUE,
             )
+        }
+    }
+
+    /// A grid of `n` by `n` quads, two triangles each, row by row: the stored order follows
+    /// the primitive order (a mesh, not a soup). Without indices each triangle has its own
+    /// three vertices.
+    fn grid(n: usize, index: vk::IndexType) -> Tris {
+        let corner = |i: usize, j: usize| [i as f32, j as f32, ((i * j) % 7) as f32 * 0.1];
+        let mut corners = Vec::new();
+        let mut triples = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let v = |di: usize, dj: usize| ((j + dj) * (n + 1) + i + di) as u32;
+                triples.push([v(0, 0), v(1, 0), v(1, 1)]);
+                triples.push([v(0, 0), v(1, 1), v(0, 1)]);
+            }
+        }
+        for j in 0..=n {
+            for i in 0..=n {
+                corners.push(corner(i, j));
+            }
+        }
+        let (positions, index) = if index == vk::IndexType::NONE_KHR {
+            let flat: Vec<[f32; 3]> = triples
+                .iter()
+                .flatten()
+                .map(|&v| corners[v as usize])
+                .collect();
+            (flat, None)
+        } else {
+            let bytes = triples
+                .iter()
+                .flatten()
+                .flat_map(|v| v.to_le_bytes())
+                .collect();
+            (corners, Some((index, bytes)))
+        };
+        Tris {
+            verts: bytemuck::cast_slice(&positions).to_vec(),
+            stride: 12,
+            index,
+            transform: None,
+            max_vertex: positions.len() as u32 - 1,
+            count: triples.len() as u32,
         }
     }
 
@@ -1799,6 +1937,63 @@ mod tests {
             )
             .unwrap_err();
             assert!(e.contains("03664"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_large_mesh_is_rewritten_in_stored_order_with_the_same_result() {
+        let mut r = Rng(21);
+        for index in [vk::IndexType::UINT32, vk::IndexType::NONE_KHR] {
+            // 2^19 triangles, as many as the path needs.
+            let t = grid(512, index);
+            let ranges = tri_ranges(&[&t]);
+            let mut moved = t.clone();
+            moved.jiggle(&mut r);
+            // (The path is taken: the built tree's ids follow the primitive order.)
+            let device = Device::new();
+            let blas = crate::quick::build(
+                &device,
+                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+                vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+                &[t.geometry()],
+                &ranges,
+            )
+            .unwrap();
+            let buf = aligned(&device.with_bytes(blas, |b| Ok(b.to_vec())).unwrap());
+            let v = View::parse(bytemuck::cast_slice(&buf)).unwrap();
+            assert!(v.prim_ids.len() >= GATHER_MIN_PRIMS && !scattered(v.prim_ids));
+            check(
+                &[t.geometry()],
+                &[moved.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap();
+            // An active triangle made inactive, an index past maxVertex: reported as the
+            // general path does.
+            let mut bad = moved.clone();
+            let last = bad.max_vertex as usize;
+            bad.vertex_mut(last)[..4].copy_from_slice(&f32::NAN.to_le_bytes());
+            let e = check(
+                &[t.geometry()],
+                &[bad.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap_err();
+            assert!(e.contains("03664"), "{e}");
+            let Some((_, idx)) = &mut moved.index else {
+                continue;
+            };
+            idx[4000..4004].copy_from_slice(&(t.max_vertex + 1).to_le_bytes());
+            let e = check(
+                &[t.geometry()],
+                &[moved.geometry()],
+                &ranges,
+                PrimKind::Triangles,
+            )
+            .unwrap_err();
+            assert!(e.contains("maxVertex"), "{e}");
         }
     }
 }
