@@ -1068,20 +1068,32 @@ impl<const IDX: usize, const STRIDE: usize> F32Geometry<'_, IDX, STRIDE> {
     /// decide (a vertex out of range, an X that is NaN).
     #[inline(always)]
     fn tri(&self, v: [usize; 3]) -> Option<[f32x4; 3]> {
-        // With 12-byte vertices the reads' own bounds checks are this test: the data ends
-        // where vertex `count - 1`'s 16 bytes do.
+        // With 12-byte vertices the reads' bounds check is this test: the data ends where
+        // vertex `count - 1`'s 16 bytes do.
         if STRIDE != 12 && v[0].max(v[1]).max(v[2]) >= self.verts.count {
             return None;
         }
-        let mut verts = self.verts;
-        if STRIDE != 0 {
-            verts.stride = STRIDE;
-        }
-        let (a, b, c) = (
-            verts.vertex(v[0])?,
-            verts.vertex(v[1])?,
-            verts.vertex(v[2])?,
-        );
+        let (a, b, c) = if STRIDE == 12 {
+            // One check for the three reads (each vertex's 16 bytes end where the last one's
+            // do or before), which the compiler then drops from each read.
+            let last = v[0].max(v[1]).max(v[2]);
+            let data = self
+                .verts
+                .data
+                .get(..last.checked_mul(12)?.checked_add(16)?)?;
+            let read = |v: usize| -> f32x4 { bytemuck::pod_read_unaligned(&data[12 * v..][..16]) };
+            (read(v[0]), read(v[1]), read(v[2]))
+        } else {
+            let mut verts = self.verts;
+            if STRIDE != 0 {
+                verts.stride = STRIDE;
+            }
+            (
+                verts.vertex(v[0])?,
+                verts.vertex(v[1])?,
+                verts.vertex(v[2])?,
+            )
+        };
         // An X that is NaN makes the sum's NaN (so do infinities of both signs, which the
         // reader then decodes): one test on whole vectors, each vertex staying one load.
         if ((a + b) + c).is_nan().to_bitmask() & 1 != 0 {

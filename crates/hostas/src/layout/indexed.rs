@@ -6,10 +6,12 @@
 //! of the same geometry (so the same bits after any transform). They are numbered in order of
 //! first use in leaf order, so the vertices of a leaf lie together; a vertex last numbered
 //! more than [`WINDOW`] vertices ago is stored again instead, which keeps every triangle's
-//! three numbers within an `i16` of each other. The pass runs after the tree, the ids and the
-//! direct triangles are written; it moves the ids and nodes down over the room it frees, so
-//! the used size (what compaction keeps) shrinks with it. Where sharing would not save room
-//! (triangles that share no vertices), the structure keeps its direct triangles.
+//! three numbers within an `i16` of each other. The pass runs after the tree and the ids are
+//! written: it reads each triangle from the decoded ones (in scratch) and writes the records
+//! and vertices straight into the triangle section, then moves the ids and nodes down over the
+//! room it frees, so the used size (what compaction keeps) shrinks with it. Where sharing
+//! would not save room (triangles that share no vertices), the structure gets direct
+//! triangles.
 
 use super::{
     HEADER_SIZE, Header, NODE_SIZE, SECTION_ALIGN, TRIANGLES_INDEXED, TriRecord, align_up,
