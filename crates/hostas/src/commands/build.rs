@@ -1255,8 +1255,11 @@ fn share_vertices(
     }
     // The pass reads the ids from the structure, each triangle from `data`.
     let at = h.prim_ids_offset as usize;
-    let ids: &mut [u32] = bytemuck::try_cast_slice_mut(&mut bytes[at..at + 4 * refs.len()])
-        .map_err(|e| internal(&format!("primitive ids: {e}")))?;
+    let ids = bytes
+        .get_mut(at..at + 4 * refs.len())
+        .ok_or_else(|| internal("primitive ids past the structure"))?;
+    let ids: &mut [u32] =
+        bytemuck::try_cast_slice_mut(ids).map_err(|e| internal(&format!("primitive ids: {e}")))?;
     for (i, r) in ids.iter_mut().zip(refs) {
         *i = r.id;
     }
