@@ -74,11 +74,11 @@ pub struct Preset {
     pub name: &'static str,
     pub id: u32,
     pub algorithm: Algorithm,
-    /// Leaves never hold more primitives than this. (Ranges of fewer than `WIDTH` are always
-    /// leaves; from `WIDTH` up to this, the SAH decides. Fast-trace allows 12, so that a small
-    /// closed object, such as a box of 12 triangles, can stay one leaf where the SAH prefers
-    /// it, instead of a full node of eight tiny leaves: 40.7 -> 38.6 bytes per triangle on the
-    /// benchmark's boxes, trace instructions unchanged within 0.5%.)
+    /// Leaves never hold more primitives than this. (In the SAH builder, ranges of fewer than
+    /// `WIDTH` are always leaves; from `WIDTH` up to this, the SAH decides. Fast-trace allows
+    /// 12, so that a small closed object, such as a box of 12 triangles, can stay one leaf
+    /// where the SAH prefers it, instead of a full node of eight tiny leaves: 40.7 -> 38.6
+    /// bytes per triangle on the benchmark's boxes, trace instructions unchanged within 0.5%.)
     pub max_leaf: usize,
     /// SAH cost of visiting a node relative to testing one primitive: higher values make
     /// larger leaves and fewer nodes.
