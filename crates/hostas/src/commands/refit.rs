@@ -1892,6 +1892,25 @@ mod tests {
         }
     }
 
+    /// The primitive ids, in stored order, of `t` built with ALLOW_UPDATE (what decides the
+    /// one-thread refit path).
+    fn stored_ids(t: &Tris, ranges: &[BuildRangeInfo]) -> Vec<u32> {
+        let device = Device::new();
+        let blas = crate::quick::build(
+            &device,
+            vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
+            vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
+            &[t.geometry()],
+            ranges,
+        )
+        .unwrap();
+        let buf = aligned(&device.with_bytes(blas, |b| Ok(b.to_vec())).unwrap());
+        View::parse(bytemuck::cast_slice(&buf))
+            .unwrap()
+            .prim_ids
+            .to_vec()
+    }
+
     #[test]
     fn a_soup_is_rewritten_in_primitive_order_with_the_same_result() {
         let mut r = Rng(9);
@@ -1902,18 +1921,7 @@ mod tests {
             let mut moved = t.clone();
             moved.jiggle(&mut r);
             // (The path is taken: the built tree's ids are scattered.)
-            let device = Device::new();
-            let blas = crate::quick::build(
-                &device,
-                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
-                vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
-                &[t.geometry()],
-                &ranges,
-            )
-            .unwrap();
-            let buf = aligned(&device.with_bytes(blas, |b| Ok(b.to_vec())).unwrap());
-            let v = View::parse(bytemuck::cast_slice(&buf)).unwrap();
-            assert!(scattered(v.prim_ids));
+            assert!(scattered(&stored_ids(&t, &ranges)));
             check(
                 &[t.geometry()],
                 &[moved.geometry()],
@@ -1950,18 +1958,8 @@ mod tests {
             let mut moved = t.clone();
             moved.jiggle(&mut r);
             // (The path is taken: the built tree's ids follow the primitive order.)
-            let device = Device::new();
-            let blas = crate::quick::build(
-                &device,
-                vk::AccelerationStructureTypeKHR::BOTTOM_LEVEL,
-                vk::BuildAccelerationStructureFlagsKHR::ALLOW_UPDATE,
-                &[t.geometry()],
-                &ranges,
-            )
-            .unwrap();
-            let buf = aligned(&device.with_bytes(blas, |b| Ok(b.to_vec())).unwrap());
-            let v = View::parse(bytemuck::cast_slice(&buf)).unwrap();
-            assert!(v.prim_ids.len() >= GATHER_MIN_PRIMS && !scattered(v.prim_ids));
+            let ids = stored_ids(&t, &ranges);
+            assert!(ids.len() >= GATHER_MIN_PRIMS && !scattered(&ids));
             check(
                 &[t.geometry()],
                 &[moved.geometry()],
