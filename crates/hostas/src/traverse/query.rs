@@ -362,20 +362,7 @@ pub(super) fn descend(
     if mask & (mask - 1) == 0 {
         return Some(entry(mask.trailing_zeros() as usize));
     }
-    // A pushed child is requested now, so that its misses overlap the rest of the walk: an
-    // inner node's four lines, or a leaf's first and last triangle.
-    let warm = |e: &Entry| {
-        if e.child & LEAF_BIT == 0 {
-            if let Some(n) = nodes.get(e.child as usize) {
-                let r = n.rows();
-                for k in [0, 2, 4, 6] {
-                    crate::math::prefetch(&r[k]);
-                }
-            }
-        } else {
-            triangles.prefetch((e.child & !LEAF_BIT) as usize, e.count as usize);
-        }
-    };
+    let warm = |e: &Entry| warm(nodes, triangles, e);
     let start = *sp;
     // Two children (the most common case after one): the farther is pushed, the nearer
     // returned, in the order the insertion sort below would give (on a tie, the later lane
@@ -433,6 +420,22 @@ pub(super) fn descend(
     }
     *sp = end - 1;
     stack.get(*sp).copied()
+}
+
+/// Requests a pushed child now, so that its misses overlap the rest of the walk: an inner
+/// node's four lines, or a leaf's first and last triangle.
+#[inline(always)]
+fn warm(nodes: &[Node], triangles: impl TriangleSource, e: &Entry) {
+    if e.child & LEAF_BIT == 0 {
+        if let Some(n) = nodes.get(e.child as usize) {
+            let r = n.rows();
+            for k in [0, 2, 4, 6] {
+                crate::math::prefetch(&r[k]);
+            }
+        }
+    } else {
+        triangles.prefetch((e.child & !LEAF_BIT) as usize, e.count as usize);
+    }
 }
 
 struct Bottom<'s> {
