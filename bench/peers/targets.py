@@ -3,7 +3,11 @@
 
 Each ratio is taken within one run (hostas and the peer measured in the same process), then
 the median over runs is printed with the range, so a noisy machine shows as a wide range
-instead of a lucky cell. Usage: targets.py RUN1.jsonl [RUN2.jsonl ...] > table.md
+instead of a lucky cell. The timed ratios come from each run's paired phase where it has one
+(the median of that run's pair ratios, hostas and Embree alternated back to back); runs
+without paired records (older runs, `--pairs 0`, a skipped pair) fall back to the ratio of the
+two per-library medians, and such cells are marked. Usage:
+targets.py RUN1.jsonl [RUN2.jsonl ...] > table.md
 """
 import json
 import statistics
@@ -11,12 +15,16 @@ import sys
 
 
 def rows(path):
-    out = {}
+    """The run's per-library rows by (scene, library, key), and its paired medians by
+    (scene, paired target)."""
+    out, paired = {}, {}
     for line in open(path):
         d = json.loads(line)
         if "library" in d:
             out[(d["scene"], d["library"], d["key"])] = d
-    return out
+        elif "paired" in d and d.get("median") is not None:
+            paired[(d["scene"], d["paired"])] = d["median"]
+    return out, paired
 
 
 def get(r, scene, lib, key, field, threads=None):
@@ -29,19 +37,27 @@ def get(r, scene, lib, key, field, threads=None):
     return v
 
 
-# (column title, target, numerator, denominator); each side is (lib, key, field, threads).
+# (column title, target, numerator, denominator, paired target or None); each side is
+# (lib, key, field, threads).
 COLUMNS = [
     ("fast-trace build ÷ Embree MEDIUM, 1T", "≥ 1.5",
-     ("hostas", "fast_trace", "build_mtris_s", 1), ("embree", "MEDIUM", "build_mtris_s", 1)),
+     ("hostas", "fast_trace", "build_mtris_s", 1), ("embree", "MEDIUM", "build_mtris_s", 1),
+     "fast_trace_build_1t_vs_medium"),
     ("fast-trace SAH(1,1) ÷ Embree MEDIUM, 8-wide", "≤ 1.0",
-     ("hostas", "fast_trace", "sah8_ct1_ci1", None), ("embree", "MEDIUM", "sah8_ct1_ci1", None)),
+     ("hostas", "fast_trace", "sah8_ct1_ci1", None), ("embree", "MEDIUM", "sah8_ct1_ci1", None),
+     None),
     ("fast-build build ÷ Embree LOW, 1T", "≥ 1.5",
-     ("hostas", "fast_build", "build_mtris_s", 1), ("embree", "LOW", "build_mtris_s", 1)),
+     ("hostas", "fast_build", "build_mtris_s", 1), ("embree", "LOW", "build_mtris_s", 1),
+     "fast_build_build_1t_vs_low"),
     ("fast-trace primary ÷ MEDIUM", "≥ 1.0",
-     ("hostas", "fast_trace", "primary_mrays_s_1t", None), ("embree", "MEDIUM", "primary_mrays_s_1t", None)),
+     ("hostas", "fast_trace", "primary_mrays_s_1t", None), ("embree", "MEDIUM", "primary_mrays_s_1t", None),
+     "fast_trace_primary_vs_medium"),
     ("fast-trace incoherent ÷ MEDIUM", "≥ 1.0",
-     ("hostas", "fast_trace", "incoherent_mrays_s_1t", None), ("embree", "MEDIUM", "incoherent_mrays_s_1t", None)),
+     ("hostas", "fast_trace", "incoherent_mrays_s_1t", None), ("embree", "MEDIUM", "incoherent_mrays_s_1t", None),
+     "fast_trace_incoherent_vs_medium"),
 ]
+# Marks a timed-ratio cell where at least one run had no paired median.
+FALLBACK = "†"
 # Absolute figures: (title, target, (lib, key, field, threads)).
 ABSOLUTE = [
     ("B/tri hostas fast-trace (compacted)", "≤ 40", ("hostas", "fast_trace", "bytes_per_tri", None)),
@@ -66,7 +82,7 @@ def fmt(values, digits=2):
 def main(paths):
     runs = [rows(p) for p in paths]
     # The all-threads count of each run (the JSON keys threads by number).
-    for r in runs:
+    for r, _ in runs:
         for d in r.values():
             n = d.get("threads_all")
             if n:
@@ -74,27 +90,36 @@ def main(paths):
                     if str(n) in (d.get(f) or {}):
                         d[f]["all"] = d[f][str(n)]
     scenes = []
-    for r in runs:
+    for r, _ in runs:
         for (s, _, _) in r:
             if s not in scenes:
                 scenes.append(s)
     titles = [f"{c[0]} ({c[1]})" for c in COLUMNS] + [
         f"{a[0]} ({a[1]})" if a[1] else a[0] for a in ABSOLUTE
     ]
-    print(f"Runs: {len(runs)} ({', '.join(paths)}). Cells: median over runs (min–max).\n")
+    with_pairs = sum(1 for _, p in runs if p)
+    print(f"Runs: {len(runs)} ({', '.join(paths)}). Cells: median over runs (min–max).")
+    print(f"Build and trace ratios: each run's paired median (hostas and Embree alternated back to "
+          f"back, median of the pair ratios; {with_pairs} of {len(runs)} runs have paired records); "
+          f"{FALLBACK}: at least one run had none for that cell and gave the ratio of its two "
+          f"per-library medians instead. SAH: ratio of the two values.\n")
     print("| scene | " + " | ".join(titles) + " |")
     print("|---|" + "--:|" * len(titles))
     for s in scenes:
         cells = []
-        for _, _, num, den in COLUMNS:
-            ratios = []
-            for r in runs:
+        for _, _, num, den, pname in COLUMNS:
+            ratios, fell_back = [], False
+            for r, p in runs:
+                if pname and (s, pname) in p:
+                    ratios.append(p[(s, pname)])
+                    continue
                 a, b = get(r, s, *num), get(r, s, *den)
                 if a and b:
                     ratios.append(a / b)
-            cells.append(fmt(ratios))
+                    fell_back = fell_back or pname is not None
+            cells.append(fmt(ratios) + (f" {FALLBACK}" if fell_back else ""))
         for _, _, src in ABSOLUTE:
-            cells.append(fmt([get(r, s, *src) for r in runs], 1))
+            cells.append(fmt([get(r, s, *src) for r, _ in runs], 1))
         print(f"| {s} | " + " | ".join(cells) + " |")
 
 

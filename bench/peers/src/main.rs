@@ -4,6 +4,7 @@
 mod mesh;
 #[cfg(not(feature = "cli-mesh"))]
 mod meshload_standin;
+mod paired;
 mod peers;
 mod rays;
 mod report;
@@ -103,6 +104,14 @@ struct Args {
     /// Run every variant on the crown too (default there: hostas and Embree MEDIUM only).
     #[arg(long)]
     full_crown: bool,
+    /// Pairs per target in the paired phase (hostas and Embree alternated, ratio per pair;
+    /// see README); 0 turns the phase off.
+    #[arg(long, default_value_t = 7)]
+    pairs: usize,
+    /// Build pairs per target on scenes of --big-tris triangles or more (trace pairs stay
+    /// --pairs).
+    #[arg(long, default_value_t = 5)]
+    big_pairs: usize,
 }
 
 #[derive(Clone)]
@@ -116,6 +125,9 @@ pub struct Cfg {
     pub refit: bool,
     pub trace: bool,
     pub sah_proxy: SahProxy,
+    /// Pairs per target in the paired phase (0: off), and build pairs (fewer on big scenes).
+    pub pairs: usize,
+    pub build_pairs: usize,
     libs: Vec<String>,
     variants: Option<Vec<String>>,
 }
@@ -162,6 +174,8 @@ fn main() {
         refit: !args.no_refit,
         trace: !args.no_trace,
         sah_proxy: args.embree_sah_proxy,
+        pairs: args.pairs,
+        build_pairs: args.pairs,
         libs: args.libs.clone(),
         variants: args.variants.clone(),
     };
@@ -177,7 +191,7 @@ fn main() {
 
     println!("# hostas vs peers\n");
     println!(
-        "Threads: 1 and {all_threads} (machine: {} logical CPUs). Builds and refits: median of {} after {} warm-up ({} after {} for Embree HIGH and tinybvh BuildHQ; fewer on scenes of {}+ triangles, see the notes). Trace: {} primary + {} incoherent rays, closest hit, t in [0, inf), 1 thread, median of {} passes. FTZ/DAZ on for every thread we own.",
+        "Threads: 1 and {all_threads} (machine: {} logical CPUs). Builds and refits: median of {} after {} warm-up ({} after {} for Embree HIGH and tinybvh BuildHQ; fewer on scenes of {}+ triangles, see the notes). Trace: {} primary + {} incoherent rays, closest hit, t in [0, inf), 1 thread, median of {} passes. {} FTZ/DAZ on for every thread we own.",
         util::available_threads(),
         base.reps,
         base.warmup,
@@ -186,7 +200,16 @@ fn main() {
         args.big_tris,
         args.rays * args.rays,
         args.rays * args.rays,
-        base.passes
+        base.passes,
+        if args.pairs > 0 {
+            format!(
+                "Paired phase: hostas and Embree alternated, {} pairs per target ({} build pairs on big scenes), median of the pair ratios.",
+                args.pairs,
+                args.big_pairs.max(1)
+            )
+        } else {
+            "Paired phase off (--pairs 0).".to_string()
+        }
     );
     println!(
         "Versions: Embree {}, tinybvh 1.6.8 (tinybvh-rs 0.1.0-beta.3 header, C++ shim), obvhs 0.4.0, hostas {}.",
@@ -226,9 +249,12 @@ fn main() {
             cfg.reps = args.big_reps.max(1);
             cfg.warmup = args.big_warmup;
             cfg.slow_reps = args.big_slow_reps.max(1);
+            if cfg.pairs > 0 {
+                cfg.build_pairs = args.big_pairs.max(1);
+            }
             notes.push(format!(
-                "big scene: builds and refits median of {} after {} warm-up ({} for Embree HIGH / tinybvh BuildHQ)",
-                cfg.reps, cfg.warmup, cfg.slow_reps
+                "big scene: builds and refits median of {} after {} warm-up ({} for Embree HIGH / tinybvh BuildHQ); {} build pairs",
+                cfg.reps, cfg.warmup, cfg.slow_reps, cfg.build_pairs
             ));
         }
         if name == "crown" && !args.full_crown && args.variants.is_none() {
@@ -267,6 +293,16 @@ fn main() {
             );
             rows.extend(r);
         }
+        let t0 = Instant::now();
+        let paired = paired::run(&sc, &rays, &cfg);
+        let paired_seconds = t0.elapsed().as_secs_f64();
+        if !paired.is_empty() {
+            eprintln!(
+                "[{:6.1}s]   paired: {} targets in {paired_seconds:.1}s",
+                started.elapsed().as_secs_f64(),
+                paired.len(),
+            );
+        }
         let mut rep = SceneReport {
             scene: sc.name.clone(),
             source: sc.source.clone(),
@@ -274,6 +310,9 @@ fn main() {
             diagonal: sc.diagonal(),
             threads: threads.clone(),
             rows,
+            paired,
+            pairs: (cfg.build_pairs, cfg.pairs),
+            paired_seconds,
             reference: None,
             checks: Vec::new(),
             notes,

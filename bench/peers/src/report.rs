@@ -1,5 +1,6 @@
 //! Result rows, the hit cross-check, Markdown tables and JSON lines.
 
+use crate::paired::Ratio;
 use crate::rays::{Hit, Kind};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
@@ -147,6 +148,11 @@ pub struct SceneReport {
     pub diagonal: f32,
     pub threads: Vec<usize>,
     pub rows: Vec<Row>,
+    /// The paired phase's targets (`crate::paired`), the pair counts asked for (builds,
+    /// traces), and its wall time.
+    pub paired: Vec<Ratio>,
+    pub pairs: (usize, usize),
+    pub paired_seconds: f64,
     /// Row index used as the cross-check reference, and its name.
     pub reference: Option<usize>,
     pub checks: Vec<[Option<Check>; 2]>,
@@ -342,6 +348,7 @@ impl SceneReport {
             );
             s += &ratio_rows;
         }
+        s += &self.paired_markdown();
         let mut notes = self.notes.clone();
         for r in &self.rows {
             if !r.note.is_empty() {
@@ -355,6 +362,39 @@ impl SceneReport {
             }
         }
         s += &format!("\n(scene wall time {:.1} s)\n", self.seconds);
+        s
+    }
+
+    fn paired_markdown(&self) -> String {
+        if self.paired.is_empty() {
+            return String::new();
+        }
+        let mut s = format!(
+            "\nPaired ratios, hostas ÷ Embree throughput (> 1: hostas is faster), 1 thread: {} build pairs / {} trace pairs per target, each pair run back to back with the first side alternating; median of the pair ratios ({:.1} s):\n\n| target | hostas | Embree | median | range | n |\n|---|---|---|--:|--:|--:|\n",
+            self.pairs.0, self.pairs.1, self.paired_seconds
+        );
+        for r in &self.paired {
+            let t = r.target;
+            s += &match &r.pairs {
+                Ok(p) => {
+                    let (m, lo, hi) = p.summary();
+                    format!(
+                        "| {} | {} | {} | {m:.2} | {lo:.2}–{hi:.2} | {} |\n",
+                        t.what,
+                        t.hostas,
+                        t.embree,
+                        p.hostas_ms.len()
+                    )
+                }
+                Err(why) => format!(
+                    "| {} | {} | {} | skipped: {} | | 0 |\n",
+                    t.what,
+                    t.hostas,
+                    t.embree,
+                    why.replace('|', "/")
+                ),
+            };
+        }
         s
     }
 
@@ -395,6 +435,27 @@ impl SceneReport {
             if let Value::Object(m) = &mut v {
                 for (k, x) in &r.extra {
                     m.insert(k.clone(), x.clone());
+                }
+            }
+            out.push(v.to_string());
+        }
+        for r in &self.paired {
+            let t = r.target;
+            let mut v = json!({
+                "paired": t.name, "scene": self.scene, "tris": self.tris,
+                "hostas_key": t.hostas, "embree_key": t.embree, "measure": t.what,
+            });
+            if let Value::Object(m) = &mut v {
+                let fields = match &r.pairs {
+                    Ok(p) => {
+                        let (median, min, max) = p.summary();
+                        json!({"median": median, "min": min, "max": max, "n": p.hostas_ms.len(),
+                               "ratios": p.ratios(), "hostas_ms": p.hostas_ms, "embree_ms": p.embree_ms})
+                    }
+                    Err(why) => json!({"skipped": why, "n": 0}),
+                };
+                if let Value::Object(f) = fields {
+                    m.extend(f);
                 }
             }
             out.push(v.to_string());

@@ -20,6 +20,7 @@
 //!   (a node visit 1, a triangle test 1).
 
 use crate::Cfg;
+use crate::paired::Side;
 use crate::peers::trace_all;
 use crate::rays::{Hit, Ray, RaySet};
 use crate::report::{Class, Row};
@@ -29,6 +30,7 @@ use crate::util::{median_ms, time};
 use embree::sys::*;
 use std::ffi::{CStr, CString, c_void};
 use std::sync::atomic::{AtomicI64, Ordering};
+use std::time::Duration;
 
 const INVALID_ID: u32 = u32::MAX;
 
@@ -374,6 +376,72 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         rows.push(refit_row);
     }
     rows
+}
+
+/// Embree's side of the paired phase (`crate::paired`): a 1-thread device, builds of one
+/// quality timed as in `run` (`rtcCommitScene` only), and `rtcIntersect1` on the kept one.
+struct PairSide<'a> {
+    kept: Option<(RTCScene, RTCGeometry)>,
+    verts: Vec<[f32; 4]>,
+    idx: &'a [[u32; 3]],
+    quality: RTCBuildQuality,
+    // Last: released after the kept scene.
+    d: Device,
+}
+
+pub fn pair_side<'a>(scene: &'a Scene, key: &str) -> Result<Box<dyn Side + 'a>, String> {
+    let v = VARIANTS
+        .iter()
+        .find(|v| v.key == key)
+        .ok_or_else(|| format!("no Embree variant {key}"))?;
+    Ok(Box::new(PairSide {
+        kept: None,
+        verts: verts4(&scene.positions),
+        idx: &scene.indices,
+        quality: v.quality,
+        d: Device::new(1),
+    }))
+}
+
+fn release((s, g): (RTCScene, RTCGeometry)) {
+    unsafe {
+        rtcReleaseGeometry(g);
+        rtcReleaseScene(s);
+    }
+}
+
+impl Side for PairSide<'_> {
+    fn build(&mut self, keep: bool) -> Result<Duration, String> {
+        let q = self.quality;
+        let (s, g) = new_scene(&self.d, &self.verts, self.idx, q, q, RTCSceneFlags::NONE);
+        let ((), dt) = time(|| unsafe { rtcCommitScene(s) });
+        let err = unsafe { rtcGetDeviceError(self.d.dev) };
+        if err != RTCError::NONE {
+            release((s, g));
+            return Err(format!("rtcCommitScene: {err:?}"));
+        }
+        if keep {
+            if let Some(old) = self.kept.replace((s, g)) {
+                release(old);
+            }
+        } else {
+            release((s, g));
+        }
+        Ok(dt)
+    }
+
+    fn trace(&mut self, rays: &[Ray], hits: &mut [Hit]) -> Result<Duration, String> {
+        let (s, _) = self.kept.ok_or("no kept structure")?;
+        Ok(time(|| trace(s, rays, hits)).1)
+    }
+}
+
+impl Drop for PairSide<'_> {
+    fn drop(&mut self) {
+        if let Some(kept) = self.kept.take() {
+            release(kept);
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

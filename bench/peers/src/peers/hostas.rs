@@ -18,6 +18,7 @@
 //!   untimed); checked against a fresh build over the moved vertices.
 
 use crate::Cfg;
+use crate::paired::Side;
 use crate::peers::trace_all;
 use crate::rays::{Hit, Ray, RaySet};
 use crate::report::{Class, Row};
@@ -25,6 +26,7 @@ use crate::scene::Scene;
 use crate::util::{median_ms, pool, time};
 use hostas::{AccelerationStructure, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, vk};
 use serde_json::json;
+use std::time::Duration;
 
 type Flags = vk::BuildAccelerationStructureFlagsKHR;
 
@@ -304,4 +306,76 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             })
         })
         .collect()
+}
+
+/// hostas's side of the paired phase (`crate::paired`): 1-thread builds of one preset, timed as
+/// in `run_preset`, and traces of the kept one through a single-instance TLAS, as in
+/// `trace_blas`.
+struct PairSide<'a> {
+    device: Device,
+    pool: rayon::ThreadPool,
+    scene: &'a Scene,
+    flags: Flags,
+    /// The kept BLAS and the TLAS over it.
+    kept: Option<(AccelerationStructure, AccelerationStructure)>,
+}
+
+pub fn pair_side<'a>(scene: &'a Scene, key: &str) -> Result<Box<dyn Side + 'a>, String> {
+    let p = PRESETS
+        .iter()
+        .find(|p| p.key == key)
+        .ok_or_else(|| format!("no hostas preset {key}"))?;
+    Ok(Box::new(PairSide {
+        device: Device::new(),
+        pool: pool(1),
+        scene,
+        flags: (p.flags)(),
+        kept: None,
+    }))
+}
+
+impl PairSide<'_> {
+    fn release(&mut self) {
+        if let Some((blas, tlas)) = self.kept.take() {
+            let _ = self.device.destroy_acceleration_structure(tlas);
+            let _ = self.device.destroy_acceleration_structure(blas);
+        }
+    }
+}
+
+impl Side for PairSide<'_> {
+    fn build(&mut self, keep: bool) -> Result<Duration, String> {
+        let (pos, idx) = (&self.scene.positions, &self.scene.indices);
+        let (device, flags) = (&self.device, self.flags);
+        let (blas, dt) = self
+            .pool
+            .install(|| time(|| build(device, pos, idx, flags)));
+        let blas = blas?;
+        if keep {
+            self.release();
+            let tlas = hostas::quick::build_single_instance_tlas(&self.device, blas);
+            match tlas {
+                Ok(tlas) => self.kept = Some((blas, tlas)),
+                Err(e) => {
+                    let _ = self.device.destroy_acceleration_structure(blas);
+                    return Err(format!("TLAS build failed: {e}"));
+                }
+            }
+        } else {
+            let _ = self.device.destroy_acceleration_structure(blas);
+        }
+        Ok(dt)
+    }
+
+    fn trace(&mut self, rays: &[Ray], hits: &mut [Hit]) -> Result<Duration, String> {
+        let (_, tlas) = self.kept.ok_or("no kept structure")?;
+        let scene = self.device.scene(tlas).map_err(|e| format!("scene: {e}"))?;
+        Ok(time(|| trace(&scene, rays, hits)).1)
+    }
+}
+
+impl Drop for PairSide<'_> {
+    fn drop(&mut self) {
+        self.release();
+    }
 }

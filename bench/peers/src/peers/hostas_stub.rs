@@ -3,6 +3,7 @@
 //! row, and the hit cross-check falls back to Embree MEDIUM as the reference.
 
 use crate::Cfg;
+use crate::paired::Side;
 use crate::rays::RaySet;
 use crate::report::{Class, Row};
 use crate::scene::Scene;
@@ -14,15 +15,19 @@ const PRESETS: [(&str, &str, Class); 4] = [
     ("low_memory", "LOW_MEMORY", Class::LowMemory),
 ];
 
+const MISSING: &str = "built without the `hostas` feature (PEERS_FEATURES did not include it)";
+
+pub fn pair_side<'a>(_scene: &'a Scene, _key: &str) -> Result<Box<dyn Side + 'a>, String> {
+    Err(MISSING.into())
+}
+
 pub fn run(_scene: &Scene, _rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
     PRESETS
         .iter()
         .filter(|p| cfg.wants("hostas", p.0))
         .map(|p| {
             let mut r = Row::new("hostas", p.0, p.1, Some(p.2));
-            r.error = Some(
-                "built without the `hostas` feature (PEERS_FEATURES did not include it)".into(),
-            );
+            r.error = Some(MISSING.into());
             r
         })
         .collect()

@@ -1,0 +1,203 @@
+//! The paired phase: hostas and Embree measured back to back, one ratio per pair.
+//!
+//! Per-library medians taken a minute apart move by up to ±30% on a shared 2-vCPU machine, so
+//! their ratio does too. perf-anchors.md 4.3 asks for every goal to be a ratio measured in the
+//! same process, on the same rays, with the same thread count, interleaved. So, for each
+//! issue-5 target that compares hostas with Embree, this phase runs N pairs of one hostas and
+//! one Embree measurement, alternating which side runs first (hostas, Embree; Embree, hostas;
+//! ...: ABBA), takes the ratio within each pair (hostas throughput ÷ Embree throughput, that is
+//! Embree time ÷ hostas time, since both sides do the same work), and reports the median of the
+//! pair ratios with their range.
+
+use crate::Cfg;
+use crate::peers;
+use crate::rays::{Hit, Kind, Ray, RaySet};
+use crate::scene::Scene;
+use crate::util::median;
+use std::time::Duration;
+
+/// One library's side of a pair.
+pub trait Side {
+    /// One whole 1-thread build of the side's variant, timed as in the library's own run; the
+    /// structure is destroyed untimed, unless `keep`: then it replaces the kept one, for `trace`.
+    fn build(&mut self, keep: bool) -> Result<Duration, String>;
+    /// One pass over `rays` with the kept structure (1 thread), timed as in the library's own
+    /// run.
+    fn trace(&mut self, rays: &[Ray], hits: &mut [Hit]) -> Result<Duration, String>;
+}
+
+/// An issue-5 target measured in pairs.
+pub struct Target {
+    /// Name in the JSON (`"paired"`) and in `targets.py`.
+    pub name: &'static str,
+    /// What is timed, for the Markdown table.
+    pub what: &'static str,
+    pub hostas: &'static str,
+    pub embree: &'static str,
+}
+
+pub const FAST_BUILD_BUILD: Target = Target {
+    name: "fast_build_build_1t_vs_low",
+    what: "build 1T",
+    hostas: "fast_build",
+    embree: "LOW",
+};
+pub const FAST_TRACE_BUILD: Target = Target {
+    name: "fast_trace_build_1t_vs_medium",
+    what: "build 1T",
+    hostas: "fast_trace",
+    embree: "MEDIUM",
+};
+pub const FAST_TRACE_PRIMARY: Target = Target {
+    name: "fast_trace_primary_vs_medium",
+    what: "primary rays 1T",
+    hostas: "fast_trace",
+    embree: "MEDIUM",
+};
+pub const FAST_TRACE_INCOHERENT: Target = Target {
+    name: "fast_trace_incoherent_vs_medium",
+    what: "incoherent rays 1T",
+    hostas: "fast_trace",
+    embree: "MEDIUM",
+};
+
+/// The timed parts of each pair, in ms.
+#[derive(Default)]
+pub struct Pairs {
+    pub hostas_ms: Vec<f64>,
+    pub embree_ms: Vec<f64>,
+}
+
+impl Pairs {
+    /// hostas throughput ÷ Embree throughput, per pair.
+    pub fn ratios(&self) -> Vec<f64> {
+        self.hostas_ms
+            .iter()
+            .zip(&self.embree_ms)
+            .map(|(h, e)| e / h)
+            .collect()
+    }
+    /// (median, min, max) of the pair ratios.
+    pub fn summary(&self) -> (f64, f64, f64) {
+        let mut r = self.ratios();
+        let m = median(&mut r);
+        (m, r[0], r[r.len() - 1])
+    }
+}
+
+/// A target's outcome: its pairs, or why it was skipped.
+pub struct Ratio {
+    pub target: &'static Target,
+    pub pairs: Result<Pairs, String>,
+}
+
+/// Runs `pairs` pairs after `warmup` untimed rounds, the first side alternating: hostas then
+/// Embree in even pairs, Embree then hostas in odd ones. The closures get `true` on their last
+/// call.
+fn alternate(
+    pairs: usize,
+    warmup: usize,
+    mut hostas: impl FnMut(bool) -> Result<Duration, String>,
+    mut embree: impl FnMut(bool) -> Result<Duration, String>,
+) -> Result<Pairs, String> {
+    let mut hostas = |last| hostas(last).map_err(|e| format!("hostas: {e}"));
+    let mut embree = |last| embree(last).map_err(|e| format!("embree: {e}"));
+    for _ in 0..warmup {
+        hostas(false)?;
+        embree(false)?;
+    }
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    let mut out = Pairs::default();
+    for i in 0..pairs {
+        let last = i + 1 == pairs;
+        let (h, e) = if i % 2 == 0 {
+            let h = hostas(last)?;
+            (h, embree(last)?)
+        } else {
+            let e = embree(last)?;
+            (hostas(last)?, e)
+        };
+        out.hostas_ms.push(ms(h));
+        out.embree_ms.push(ms(e));
+    }
+    Ok(out)
+}
+
+type Sides<'a> = (Box<dyn Side + 'a>, Box<dyn Side + 'a>);
+
+/// Both sides of `target`, or why they cannot run.
+fn sides<'a>(scene: &'a Scene, cfg: &Cfg, target: &Target) -> Result<Sides<'a>, String> {
+    for (lib, key) in [("hostas", target.hostas), ("embree", target.embree)] {
+        if !cfg.wants(lib, key) {
+            return Err(format!("{lib}:{key} not selected"));
+        }
+    }
+    Ok((
+        peers::hostas::pair_side(scene, target.hostas)?,
+        peers::embree::pair_side(scene, target.embree)?,
+    ))
+}
+
+/// Build pairs after at least one untimed build of each side: a side's first build pays for
+/// fresh pages (hostas's scratch, Embree's allocator blocks), 2-4x its later ones on 1M
+/// triangles, even on big scenes where the per-library runs skip the warm-up.
+fn builds(cfg: &Cfg, (h, e): &mut Sides, keep: bool) -> Result<Pairs, String> {
+    alternate(
+        cfg.build_pairs,
+        cfg.warmup.max(1),
+        |last| h.build(keep && last),
+        |last| e.build(keep && last),
+    )
+}
+
+/// Trace pairs over the structures the last build pair kept, after one untimed pass each.
+fn traces(cfg: &Cfg, (h, e): &mut Sides, rays: &[Ray]) -> Result<Pairs, String> {
+    let mut hostas_hits = vec![Hit::MISS; rays.len()];
+    let mut embree_hits = hostas_hits.clone();
+    alternate(
+        cfg.pairs,
+        1,
+        |_| h.trace(rays, &mut hostas_hits),
+        |_| e.trace(rays, &mut embree_hits),
+    )
+}
+
+/// The paired phase of one scene (see the module comment). Empty when it is off (`--pairs 0`).
+pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Ratio> {
+    if cfg.pairs == 0 {
+        return Vec::new();
+    }
+    let mut out = Vec::new();
+    let t = &FAST_BUILD_BUILD;
+    let pairs = sides(scene, cfg, t).and_then(|mut s| builds(cfg, &mut s, false));
+    out.push(Ratio { target: t, pairs });
+    // Fast trace: the last build pair keeps its structures, which the trace pairs then use.
+    let (pairs, mut kept) = match sides(scene, cfg, &FAST_TRACE_BUILD) {
+        Ok(mut s) => match builds(cfg, &mut s, cfg.trace) {
+            Ok(p) => (Ok(p), Ok(s)),
+            Err(e) => (
+                Err(e.clone()),
+                Err(format!("no structures, the build pairs failed: {e}")),
+            ),
+        },
+        Err(why) => (Err(why.clone()), Err(why)),
+    };
+    let traced = [
+        (&FAST_TRACE_PRIMARY, Kind::Primary),
+        (&FAST_TRACE_INCOHERENT, Kind::Incoherent),
+    ]
+    .map(|(target, kind)| {
+        let pairs = match &mut kept {
+            _ if !cfg.trace => Err("--no-trace".to_string()),
+            Ok(s) => traces(cfg, s, rays.get(kind)),
+            Err(why) => Err(why.clone()),
+        };
+        Ratio { target, pairs }
+    });
+    out.push(Ratio {
+        target: &FAST_TRACE_BUILD,
+        pairs,
+    });
+    out.extend(traced);
+    out
+}
