@@ -81,7 +81,9 @@ impl Pairs {
     pub fn summary(&self) -> (f64, f64, f64) {
         let mut r = self.ratios();
         let m = median(&mut r);
-        (m, r[0], r[r.len() - 1])
+        let min = r.iter().copied().fold(f64::INFINITY, f64::min);
+        let max = r.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (m, min, max)
     }
 }
 
