@@ -3,10 +3,11 @@
 
 DIR holds PREFIX_old_N.jsonl and PREFIX_new_N.jsonl for rounds N (what an alternation script
 such as docs/results/s10/ab10/ab10.sh writes). Per scene and measure (hostas fast-trace build
-Mtris/s and fast-build build Mtris/s (against Embree LOW), primary / incoherent Mrays/s, one thread; the default preset's one-thread refit when
-present), the median over rounds of each binary, its ratio to Embree MEDIUM (Embree refit for
-the refit) within the same run in parentheses, and new ÷ old as the median of each round's
-ratio. usage: alternation.py DIR [PREFIX] > table.md
+Mtris/s, fast-build build Mtris/s, primary / incoherent Mrays/s, one thread; the default
+preset's one-thread refit when present), the median over rounds of each binary, its ratio to
+Embree within the same run in parentheses (MEDIUM; LOW for the fast build; Embree's refit for
+the refit), and new ÷ old as the median of each round's ratio.
+usage: alternation.py DIR [PREFIX] > table.md
 """
 import glob
 import json
