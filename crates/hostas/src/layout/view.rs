@@ -315,6 +315,10 @@ impl<'a> View<'a> {
     /// The geometry that holds primitive sequence number `id`, and the primitive's index in it.
     #[inline]
     pub fn locate(&self, id: u32) -> (u32, u32) {
+        // One geometry (the common case): nothing to search.
+        if let [g] = self.geometries {
+            return (0, id - g.first_primitive);
+        }
         let g = self
             .geometries
             .partition_point(|g| g.first_primitive <= id)

@@ -414,6 +414,47 @@ fn pop(stack: &[Entry], sp: &mut usize, base: usize, t_max: f32) -> Option<Entry
     None
 }
 
+/// The ray flags that cull candidates.
+const CULLING: RayFlags = RayFlags(
+    RayFlags::CULL_BACK_FACING_TRIANGLES.0
+        | RayFlags::CULL_FRONT_FACING_TRIANGLES.0
+        | RayFlags::CULL_OPAQUE.0
+        | RayFlags::CULL_NO_OPAQUE.0,
+);
+
+/// Whether a ray with `flags` culls the candidate in stored slot `prim_slot` of `view` (in
+/// instance `inst`): by facing (`front`, after `FLIP_FACING`; `None` for an AABB) or by
+/// opacity.
+#[cold]
+#[inline(never)]
+fn culled(
+    view: &View,
+    inst: &InstanceRecord,
+    flags: RayFlags,
+    prim_slot: u32,
+    front: Option<bool>,
+) -> bool {
+    let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
+    if let Some(front) = front {
+        if !iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE) {
+            let rule = if front {
+                RayFlags::CULL_FRONT_FACING_TRIANGLES
+            } else {
+                RayFlags::CULL_BACK_FACING_TRIANGLES
+            };
+            if flags.contains(rule) {
+                return true;
+            }
+        }
+    }
+    if !flags.intersects(RayFlags::CULL_OPAQUE | RayFlags::CULL_NO_OPAQUE) {
+        return false;
+    }
+    let id = view.prim_ids.get(prim_slot as usize).copied().unwrap_or(0);
+    let (g, _) = view.locate(id);
+    opacity_culled(resolve_opacity(view, g, inst, flags), flags)
+}
+
 /// The instance whose bottom-level structure is traversed.
 struct BlasAt<'a, 's> {
     view: &'a View<'s>,
@@ -447,21 +488,10 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
     } = *at;
     let sheared = boxes.sheared::<P>();
     let flags = ray.flags;
-    let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
-    let flip = iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING);
-    let face_cull = !iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE);
-    let cull_back = face_cull && flags.contains(RayFlags::CULL_BACK_FACING_TRIANGLES);
-    let cull_front = face_cull && flags.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES);
-    // Opacity only matters here when the ray culls by it.
-    let opacity_matters = flags.intersects(RayFlags::CULL_OPAQUE | RayFlags::CULL_NO_OPAQUE);
-    let culled_by_opacity = |prim_slot: u32| {
-        if !opacity_matters {
-            return false;
-        }
-        let id = view.prim_ids.get(prim_slot as usize).copied().unwrap_or(0);
-        let (g, _) = view.locate(id);
-        opacity_culled(resolve_opacity(view, g, inst, flags), flags)
-    };
+    let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
+    // Culling by facing or opacity only applies when the ray asks for it (rarely): the common
+    // case tests one flag per hit, and the rules are worked out apart.
+    let culls = flags.intersects(CULLING);
     let Walk {
         base,
         mut sp,
@@ -495,7 +525,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
                     continue;
                 }
                 let front = h.front_face != flip;
-                if (front && cull_front) || (!front && cull_back) || culled_by_opacity(p) {
+                if culls && culled(view, inst, flags, p, Some(front)) {
                     continue;
                 }
                 *best = Best {
@@ -517,7 +547,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
                 let Some(t) = boxes.aabb(b, ray.t_min, best.t) else {
                     continue;
                 };
-                if culled_by_opacity(p) {
+                if culls && culled(view, inst, flags, p, None) {
                     continue;
                 }
                 *best = Best {

@@ -59,19 +59,33 @@ struct Sheared {
 /// axis, and `kx, ky` are swapped when the ray points down `kz` (keeping the winding).
 #[inline(always)]
 pub fn permutation(dir: Vec3) -> usize {
+    // Three comparisons of the magnitudes and three signs, each set at once, index a table of
+    // the answers (branches on the dominant axis mispredict on incoherent rays).
     let a = dir.map(f32::abs);
-    let kz = if a[0] >= a[1] && a[0] >= a[2] {
-        0
-    } else if a[1] >= a[2] {
-        1
-    } else {
-        2
-    };
-    // `dir[kz] < 0` without indexing by a run-time value (which would go through memory).
-    let down =
-        usize::from(dir[0] < 0.0) | usize::from(dir[1] < 0.0) << 1 | usize::from(dir[2] < 0.0) << 2;
-    2 * kz + (down >> kz & 1)
+    let ge = f32x4::from([a[0], a[0], a[1], 0.0]).simd_ge(f32x4::from([a[1], a[2], a[2], 0.0]));
+    let down = f32x4::from([dir[0], dir[1], dir[2], 0.0]).simd_lt(f32x4::ZERO);
+    let index = (ge.to_bitmask() & 7) | (down.to_bitmask() & 7) << 3;
+    PERMUTATION_OF[index as usize & 63] as usize
 }
+
+/// [`permutation`] by `a0 >= a1 | a0 >= a2 << 1 | a1 >= a2 << 2 | (signs of x, y, z) << 3`
+/// (`a` the magnitudes of the direction, a sign bit set when the component is below zero).
+const PERMUTATION_OF: [u8; 64] = {
+    let mut table = [0; 64];
+    let mut i = 0;
+    while i < 64 {
+        let kz = if i & 3 == 3 {
+            0
+        } else if i & 4 != 0 {
+            1
+        } else {
+            2
+        };
+        table[i] = (2 * kz + (i >> (3 + kz) & 1)) as u8;
+        i += 1;
+    }
+    table
+};
 
 impl ShearedRay {
     #[inline(always)]
@@ -148,12 +162,12 @@ impl ShearedRay {
         // (whether a ray covers a triangle is data-dependent; mispredictions cost more than
         // the extra comparisons).
         if (u == 0.0) | (v == 0.0) | (w == 0.0) {
-            return self.on_edge(s);
+            return on_edge(self.sz, s);
         }
         if ((u < 0.0) | (v < 0.0) | (w < 0.0)) & ((u > 0.0) | (v > 0.0) | (w > 0.0)) {
             return None;
         }
-        self.hit(&s.z, u, v, w)
+        hit(self.sz, &s.z, u, v, w)
     }
 
     /// [`ShearedRay::intersect_axes`] for a triangle given as rows (the x coordinates of its
@@ -199,80 +213,80 @@ impl ShearedRay {
         };
         // As in `intersect_axes`: one branch per outcome.
         if lanes(uvw.simd_eq(zero)) != 0 {
-            return self.on_edge(s);
+            return on_edge(self.sz, s);
         }
         if (lanes(uvw.simd_lt(zero)) != 0) & (lanes(uvw.simd_gt(zero)) != 0) {
             return None;
         }
-        self.hit(&s.z, u, v, w)
+        hit(self.sz, &s.z, u, v, w)
     }
+}
 
-    /// The rare case of an edge function that is zero in f32: recomputed exactly, and when it
-    /// is exactly zero the point is on the edge and the top-left rule decides.
-    /// Takes the sheared triangle by value: by reference, every test would have to store it
-    /// to memory for this rare call.
-    #[cold]
-    #[inline(never)]
-    fn on_edge(&self, s: Sheared) -> Option<TriangleHit> {
-        let [ax, bx, cx] = s.x.map(f64::from);
-        let [ay, by, cy] = s.y.map(f64::from);
-        let exact = [cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax];
-        // The f64 results are exact in sign; a value that rounds to zero in f32 is kept as
-        // the smallest subnormal with the right sign.
-        let [u, v, w] = exact.map(|e| {
-            let f = e as f32;
-            if f == 0.0 && e != 0.0 {
-                f32::from_bits(1).copysign(e.signum() as f32)
-            } else {
-                f
-            }
-        });
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
+/// The rare case of an edge function that is zero in f32: recomputed exactly, and when it
+/// is exactly zero the point is on the edge and the top-left rule decides.
+/// Takes the sheared triangle and the ray's scale by value: by reference, every test would
+/// have to store them to memory for this rare call.
+#[cold]
+#[inline(never)]
+fn on_edge(sz: f32, s: Sheared) -> Option<TriangleHit> {
+    let [ax, bx, cx] = s.x.map(f64::from);
+    let [ay, by, cy] = s.y.map(f64::from);
+    let exact = [cx * by - cy * bx, ax * cy - ay * cx, bx * ay - by * ax];
+    // The f64 results are exact in sign; a value that rounds to zero in f32 is kept as
+    // the smallest subnormal with the right sign.
+    let [u, v, w] = exact.map(|e| {
+        let f = e as f32;
+        if f == 0.0 && e != 0.0 {
+            f32::from_bits(1).copysign(e.signum() as f32)
+        } else {
+            f
         }
-        let det = u + v + w;
-        if det == 0.0 {
-            return None;
-        }
-        let sign = if det > 0.0 { 1.0f64 } else { -1.0 };
-        // Edge opposite each vertex, in the cyclic order b->c, c->a, a->b.
-        let owns = |e0: f64, e1: f64| {
-            let (ex, ey) = (sign * e0, sign * e1);
-            ey > 0.0 || (ey == 0.0 && ex > 0.0)
-        };
-        if u == 0.0 && !owns(cx - bx, cy - by) {
-            return None;
-        }
-        if v == 0.0 && !owns(ax - cx, ay - cy) {
-            return None;
-        }
-        if w == 0.0 && !owns(bx - ax, by - ay) {
-            return None;
-        }
-        self.hit(&s.z, u, v, w)
+    });
+    if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
+        return None;
     }
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
+    }
+    let sign = if det > 0.0 { 1.0f64 } else { -1.0 };
+    // Edge opposite each vertex, in the cyclic order b->c, c->a, a->b.
+    let owns = |e0: f64, e1: f64| {
+        let (ex, ey) = (sign * e0, sign * e1);
+        ey > 0.0 || (ey == 0.0 && ex > 0.0)
+    };
+    if u == 0.0 && !owns(cx - bx, cy - by) {
+        return None;
+    }
+    if v == 0.0 && !owns(ax - cx, ay - cy) {
+        return None;
+    }
+    if w == 0.0 && !owns(bx - ax, by - ay) {
+        return None;
+    }
+    hit(sz, &s.z, u, v, w)
+}
 
-    /// The hit of a ray inside the triangle with edge functions `u, v, w`.
-    #[inline(always)]
-    fn hit(&self, z: &[f32; 3], u: f32, v: f32, w: f32) -> Option<TriangleHit> {
-        let det = u + v + w;
-        if det == 0.0 {
-            return None;
-        }
-        let [az, bz, cz] = z.map(|z| self.sz * z);
-        let t_scaled = u * az + v * bz + w * cz;
-        let t = t_scaled / det; // one rounding, not two: the spec asks for as much precision as possible
-        if t.is_nan() {
-            return None;
-        }
-        let rcp = 1.0 / det;
-        Some(TriangleHit {
-            t,
-            b: v * rcp,
-            c: w * rcp,
-            front_face: det > 0.0,
-        })
+/// The hit of a ray (depth scale `sz`) inside the triangle with edge functions `u, v, w`.
+#[inline(always)]
+fn hit(sz: f32, z: &[f32; 3], u: f32, v: f32, w: f32) -> Option<TriangleHit> {
+    let det = u + v + w;
+    if det == 0.0 {
+        return None;
     }
+    let [az, bz, cz] = z.map(|z| sz * z);
+    let t_scaled = u * az + v * bz + w * cz;
+    let t = t_scaled / det; // one rounding, not two: the spec asks for as much precision as possible
+    if t.is_nan() {
+        return None;
+    }
+    let rcp = 1.0 / det;
+    Some(TriangleHit {
+        t,
+        b: v * rcp,
+        c: w * rcp,
+        front_face: det > 0.0,
+    })
 }
 
 #[cfg(test)]
