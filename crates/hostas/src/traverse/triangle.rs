@@ -59,8 +59,9 @@ struct Sheared {
 /// axis, and `kx, ky` are swapped when the ray points down `kz` (keeping the winding).
 #[inline(always)]
 pub fn permutation(dir: Vec3) -> usize {
-    // Three comparisons of the magnitudes and three signs, each set at once, index a table of
-    // the answers (branches on the dominant axis mispredict on incoherent rays).
+    // Three comparisons of the magnitudes and three signs, each set made by one vector
+    // comparison, index a table of the answers (fewer instructions than the scalar chain of
+    // comparisons and selects it replaces).
     let a = dir.map(f32::abs);
     let ge = f32x4::from([a[0], a[0], a[1], 0.0]).simd_ge(f32x4::from([a[1], a[2], a[2], 0.0]));
     let down = f32x4::from([dir[0], dir[1], dir[2], 0.0]).simd_lt(f32x4::ZERO);
