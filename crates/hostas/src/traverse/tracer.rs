@@ -43,7 +43,6 @@ pub struct Tracer<'s> {
 struct Direct<'s> {
     view: View<'s>,
     inst: &'s InstanceRecord,
-    blas: u32,
 }
 
 impl<'s> Direct<'s> {
@@ -60,7 +59,7 @@ impl<'s> Direct<'s> {
         if RayFlags::NONE.skip(view.prim_kind) {
             return None;
         }
-        (!view.nodes.is_empty()).then_some(Direct { view, inst, blas })
+        (!view.nodes.is_empty()).then_some(Direct { view, inst })
     }
 }
 
@@ -146,8 +145,6 @@ impl<'s> Tracer<'s> {
                 let at = BlasAt {
                     view: &d.view,
                     inst: d.inst,
-                    slot: 0,
-                    blas: d.blas,
                 };
                 walk_blas(&mut self.stack, 0, &at, &boxes, ray, &mut best, first_hit);
             }
@@ -289,13 +286,13 @@ fn enter<'s>(
         let (o, d) = (w2o.point(ray.origin), w2o.vector(ray.direction));
         &*world.object.insert(BoxRay::new(o, d))
     };
-    let at = BlasAt {
-        view,
-        inst,
-        slot,
-        blas: bi,
-    };
-    walk_blas(stack, sp, &at, local, ray, best, first_hit)
+    let at = BlasAt { view, inst };
+    let found = walk_blas(stack, sp, &at, local, ray, best, first_hit);
+    if found {
+        best.instance_slot = slot;
+        best.blas = bi;
+    }
+    found
 }
 
 /// [`trace_blas`] for the axis permutation of the ray (`local`: in the instance's space).
@@ -455,12 +452,11 @@ fn culled(
     opacity_culled(resolve_opacity(view, g, inst, flags), flags)
 }
 
-/// The instance whose bottom-level structure is traversed.
+/// The instance whose bottom-level structure is traversed. (Which instance and which bottom
+/// level it is, the hit's caller records: the walk keeps two registers fewer.)
 struct BlasAt<'a, 's> {
     view: &'a View<'s>,
     inst: &'a InstanceRecord,
-    slot: u32,
-    blas: u32,
 }
 
 /// Continues the walk of one instance's bottom-level structure (its entries on `stack` above
@@ -480,12 +476,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
     best: &mut Best,
     first_hit: bool,
 ) -> bool {
-    let BlasAt {
-        view,
-        inst,
-        slot,
-        blas,
-    } = *at;
+    let BlasAt { view, inst } = *at;
     let sheared = boxes.sheared::<P>();
     let flags = ray.flags;
     let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
@@ -528,15 +519,11 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
                 if culls && culled(view, inst, flags, p, Some(front)) {
                     continue;
                 }
-                *best = Best {
-                    t: h.t,
-                    kind: HitKind::Triangle,
-                    instance_slot: slot,
-                    blas,
-                    prim_slot: p,
-                    barycentrics: [h.b, h.c],
-                    front_face: front,
-                };
+                best.t = h.t;
+                best.kind = HitKind::Triangle;
+                best.prim_slot = p;
+                best.barycentrics = [h.b, h.c];
+                best.front_face = front;
                 found = true;
                 if first_hit {
                     return true;
@@ -550,15 +537,11 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
                 if culls && culled(view, inst, flags, p, None) {
                     continue;
                 }
-                *best = Best {
-                    t,
-                    kind: HitKind::Generated,
-                    instance_slot: slot,
-                    blas,
-                    prim_slot: p,
-                    barycentrics: [0.0; 2],
-                    front_face: false,
-                };
+                best.t = t;
+                best.kind = HitKind::Generated;
+                best.prim_slot = p;
+                best.barycentrics = [0.0; 2];
+                best.front_face = false;
                 found = true;
                 if first_hit {
                     return true;
