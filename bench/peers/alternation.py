@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Summarize an alternation of two hostas-peers binaries (old, new) run in turns on one machine.
 
-DIR holds PREFIX_old_N.jsonl and PREFIX_new_N.jsonl for rounds N (what an alternation script
-such as docs/results/s10/ab10/ab10.sh writes). Per scene and measure (hostas fast-trace build
+DIR holds PREFIX_old_N.jsonl and PREFIX_new_N.jsonl for rounds N (what alternate.sh writes,
+with PREFIX tr). Per scene and measure (hostas fast-trace build
 Mtris/s, fast-build build Mtris/s, primary / incoherent Mrays/s, one thread; the default
 preset's one-thread refit when present), the median over rounds of each binary, its ratio to
 Embree within the same run in parentheses (MEDIUM; LOW for the fast build; Embree's refit for
