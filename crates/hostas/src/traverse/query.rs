@@ -101,7 +101,9 @@ impl Intersection {
 
 pub(super) const STACK_CAPACITY: usize = (WIDTH - 1) * MAX_DEPTH as usize + WIDTH;
 
+/// Sixteen bytes (aligned): an entry is addressed by a shift and copied whole.
 #[derive(Clone, Copy, Default)]
+#[repr(align(16))]
 pub(super) struct Entry {
     pub child: u32,
     pub count: u32,
@@ -429,7 +431,10 @@ fn warm(nodes: &[Node], triangles: impl TriangleSource, e: &Entry) {
     if e.child & LEAF_BIT == 0 {
         if let Some(n) = nodes.get(e.child as usize) {
             let r = n.rows();
-            for k in [0, 2, 4, 6] {
+            // Last line first: in this order the four requests take constant offsets from
+            // the node's address (in the other, the last one's address was computed apart for
+            // a request shared with the leaf branch: three instructions more per child).
+            for k in [6, 4, 2, 0] {
                 crate::math::prefetch(&r[k]);
             }
         }

@@ -146,7 +146,7 @@ impl<'s> Tracer<'s> {
                     view: &d.view,
                     inst: d.inst,
                 };
-                walk_blas(&mut self.stack, 0, &at, &boxes, ray, &mut best, first_hit);
+                walk_blas(&mut self.stack, &at, &boxes, ray, &mut best, first_hit);
             }
             return Ok(hit(&best, d.inst, Some(&d.view)));
         }
@@ -197,7 +197,7 @@ impl<'s> Tracer<'s> {
                     }
                 }
             }
-            match pop(stack, &mut sp, 0, best.t) {
+            match pop(stack, &mut sp, best.t) {
                 Some(e) => cur = e,
                 None => break,
             }
@@ -287,7 +287,11 @@ fn enter<'s>(
         &*world.object.insert(BoxRay::new(o, d))
     };
     let at = BlasAt { view, inst };
-    let found = walk_blas(stack, sp, &at, local, ray, best, first_hit);
+    // The walk starts on an empty stack of its own: the entries below are the top level's.
+    let Some(free) = stack.get_mut(sp..) else {
+        return false;
+    };
+    let found = walk_blas(free, &at, local, ray, best, first_hit);
     if found {
         best.instance_slot = slot;
         best.blas = bi;
@@ -302,14 +306,13 @@ fn enter<'s>(
 #[inline(always)]
 fn walk_blas(
     stack: &mut [Entry],
-    base: usize,
     at: &BlasAt,
     local: &BoxRay,
     ray: &Ray,
     best: &mut Best,
     first_hit: bool,
 ) -> bool {
-    let mut sp = base;
+    let mut sp = 0;
     let view = at.view;
     let Some(cur) = descend(
         stack,
@@ -323,7 +326,20 @@ fn walk_blas(
     ) else {
         return false;
     };
-    let walk = Walk { base, sp, cur };
+    let walk = Walk { sp, cur };
+    if view.prim_kind != PrimKind::Triangles {
+        // AABBs: no triangle test, so neither permutation nor triangle layout matters.
+        return trace_blas::<0, &[[f32; 9]], false>(
+            stack,
+            walk,
+            at,
+            NO_TRIANGLES,
+            local,
+            ray,
+            best,
+            first_hit,
+        );
+    }
     match view.triangles {
         Triangles::Direct(t) => walk_permuted(stack, walk, at, t, local, ray, best, first_hit),
         Triangles::Indexed(t) => walk_permuted(stack, walk, at, t, local, ray, best, first_hit),
@@ -344,12 +360,12 @@ fn walk_permuted<T: LeafTriangles>(
     first_hit: bool,
 ) -> bool {
     match permutation(local.direction) {
-        0 => trace_blas::<0, T>(stack, walk, at, tris, local, ray, best, first_hit),
-        1 => trace_blas::<1, T>(stack, walk, at, tris, local, ray, best, first_hit),
-        2 => trace_blas::<2, T>(stack, walk, at, tris, local, ray, best, first_hit),
-        3 => trace_blas::<3, T>(stack, walk, at, tris, local, ray, best, first_hit),
-        4 => trace_blas::<4, T>(stack, walk, at, tris, local, ray, best, first_hit),
-        _ => trace_blas::<5, T>(stack, walk, at, tris, local, ray, best, first_hit),
+        0 => trace_blas::<0, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
+        1 => trace_blas::<1, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
+        2 => trace_blas::<2, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
+        3 => trace_blas::<3, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
+        4 => trace_blas::<4, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
+        _ => trace_blas::<5, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
     }
 }
 
@@ -389,19 +405,18 @@ impl LeafTriangles for Indexed<'_> {
     }
 }
 
-/// Where a bottom-level walk stands: its entries lie above `base` up to `sp`, and `cur` is
-/// the child to visit next.
+/// Where a bottom-level walk stands: its entries lie below `sp` (the stack is its own), and
+/// `cur` is the child to visit next.
 #[derive(Clone, Copy)]
 struct Walk {
-    base: usize,
     sp: usize,
     cur: Entry,
 }
 
-/// Pops the nearest entry above `base` that may still hold a hit nearer than `t_max`.
+/// Pops the nearest entry below `sp` that may still hold a hit nearer than `t_max`.
 #[inline(always)]
-fn pop(stack: &[Entry], sp: &mut usize, base: usize, t_max: f32) -> Option<Entry> {
-    while *sp > base {
+fn pop(stack: &[Entry], sp: &mut usize, t_max: f32) -> Option<Entry> {
+    while *sp > 0 {
         *sp -= 1;
         let e = stack.get(*sp)?;
         if e.t <= prune_limit(t_max) {
@@ -459,14 +474,16 @@ struct BlasAt<'a, 's> {
     inst: &'a InstanceRecord,
 }
 
-/// Continues the walk of one instance's bottom-level structure (its entries on `stack` above
-/// `walk.base`), updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
+/// Continues the walk of one instance's bottom-level structure (its entries on `stack` below
+/// `walk.sp`), updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
 /// of the ray (`permutation(boxes.direction) == P`), so that preparing the ray for the
-/// triangle test and the test itself index nothing at run time. Not inlined: the
-/// bottom-level loop is the hot one and gets the registers to itself.
+/// triangle test and the test itself index nothing at run time, and apart for a structure of
+/// AABBs (`TRIANGLES` false; `P` and `T` then unused), so that neither loop holds what only
+/// the other needs. Not inlined: the bottom-level loop is the hot one and gets the registers
+/// to itself.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn trace_blas<const P: usize, T: LeafTriangles>(
+fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool>(
     stack: &mut [Entry],
     walk: Walk,
     at: &BlasAt,
@@ -483,11 +500,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
     // Culling by facing or opacity only applies when the ray asks for it (rarely): the common
     // case tests one flag per hit, and the rules are worked out apart.
     let culls = flags.intersects(CULLING);
-    let Walk {
-        base,
-        mut sp,
-        mut cur,
-    } = walk;
+    let Walk { mut sp, mut cur } = walk;
     let mut found = false;
     loop {
         if cur.child & LEAF_BIT == 0 {
@@ -497,7 +510,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
                 cur = next;
                 continue;
             }
-            match pop(stack, &mut sp, base, best.t) {
+            match pop(stack, &mut sp, best.t) {
                 Some(e) => {
                     cur = e;
                     continue;
@@ -507,7 +520,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
         }
         let first = cur.child & !LEAF_BIT;
         let range = first as usize..first as usize + cur.count as usize;
-        if view.prim_kind == PrimKind::Triangles {
+        if TRIANGLES {
             for (p, tri) in (first..).zip(tris.leaf(first as usize, cur.count as usize)) {
                 let Some(h) = T::intersect::<P>(&sheared, tri.borrow()) else {
                     continue;
@@ -548,7 +561,7 @@ fn trace_blas<const P: usize, T: LeafTriangles>(
                 }
             }
         }
-        match pop(stack, &mut sp, base, best.t) {
+        match pop(stack, &mut sp, best.t) {
             Some(e) => cur = e,
             None => return found,
         }
