@@ -43,6 +43,11 @@ pub struct Tracer<'s> {
 struct Direct<'s> {
     view: View<'s>,
     inst: &'s InstanceRecord,
+    /// The instance's mask (its low 8 bits), which a ray's cull mask must meet.
+    mask: u32,
+    /// The flag that skips the bottom level's kind of primitive (`SKIP_TRIANGLES` or
+    /// `SKIP_AABBS`: the only kinds that go direct).
+    skip: u32,
 }
 
 impl<'s> Direct<'s> {
@@ -56,10 +61,17 @@ impl<'s> Direct<'s> {
         let blas = scene.instance_blas_index(0)?;
         let view = scene.blas_view(blas)?;
         // Only bottom levels some ray enters (triangles or AABBs) go direct.
-        if RayFlags::NONE.skip(view.prim_kind) {
-            return None;
-        }
-        (!view.nodes.is_empty()).then_some(Direct { view, inst })
+        let skip = match view.prim_kind {
+            PrimKind::Triangles => RayFlags::SKIP_TRIANGLES,
+            PrimKind::Aabbs => RayFlags::SKIP_AABBS,
+            _ => return None,
+        };
+        (!view.nodes.is_empty()).then_some(Direct {
+            view,
+            inst,
+            mask: inst.mask & 0xff,
+            skip: skip.0,
+        })
     }
 }
 
@@ -89,6 +101,10 @@ struct Best {
 
 /// What a top level's leaves hold instead of triangles (nothing to prefetch).
 const NO_TRIANGLES: &[[f32; 9]] = &[];
+
+/// A bottom-level walk's stack: of a length known at compile time, so that the walk keeps
+/// no register for it. (The top level's entries, at most `STACK_CAPACITY`, lie below it.)
+type BlasStack = [Entry; STACK_CAPACITY];
 
 /// Room for a top-level and a bottom-level traversal on top of it.
 const TRACER_STACK: usize = 2 * STACK_CAPACITY;
@@ -140,13 +156,15 @@ impl<'s> Tracer<'s> {
             front_face: false,
         };
         if let Some(d) = &self.direct {
-            if d.inst.mask & ray.cull_mask & 0xff != 0 && !ray.flags.skip(d.view.prim_kind) {
+            if d.mask & ray.cull_mask != 0 && ray.flags.0 & d.skip == 0 {
                 let boxes = BoxRay::new(ray.origin, ray.direction);
                 let at = BlasAt {
                     view: &d.view,
                     inst: d.inst,
                 };
-                walk_blas(&mut self.stack, &at, &boxes, ray, &mut best, first_hit);
+                if let Some(stack) = self.stack.first_chunk_mut() {
+                    walk_blas(stack, &at, &boxes, ray, &mut best, first_hit);
+                }
             }
             return Ok(hit(&best, d.inst, Some(&d.view)));
         }
@@ -288,7 +306,7 @@ fn enter<'s>(
     };
     let at = BlasAt { view, inst };
     // The walk starts on an empty stack of its own: the entries below are the top level's.
-    let Some(free) = stack.get_mut(sp..) else {
+    let Some(free) = stack.get_mut(sp..).and_then(|s| s.first_chunk_mut()) else {
         return false;
     };
     let found = walk_blas(free, &at, local, ray, best, first_hit);
@@ -305,7 +323,7 @@ fn enter<'s>(
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn walk_blas(
-    stack: &mut [Entry],
+    stack: &mut BlasStack,
     at: &BlasAt,
     local: &BoxRay,
     ray: &Ray,
@@ -327,9 +345,27 @@ fn walk_blas(
         return false;
     };
     let walk = Walk { sp, cur };
+    if first_hit {
+        walk_layout::<true>(stack, walk, at, local, ray, best)
+    } else {
+        walk_layout::<false>(stack, walk, at, local, ray, best)
+    }
+}
+
+/// [`trace_blas`] for the primitives and triangle layout of the bottom level.
+#[inline(always)]
+fn walk_layout<const FIRST: bool>(
+    stack: &mut BlasStack,
+    walk: Walk,
+    at: &BlasAt,
+    local: &BoxRay,
+    ray: &Ray,
+    best: &mut Best,
+) -> bool {
+    let view = at.view;
     if view.prim_kind != PrimKind::Triangles {
         // AABBs: no triangle test, so neither permutation nor triangle layout matters.
-        return trace_blas::<0, &[[f32; 9]], false>(
+        return trace_blas::<0, &[[f32; 9]], false, FIRST>(
             stack,
             walk,
             at,
@@ -337,35 +373,33 @@ fn walk_blas(
             local,
             ray,
             best,
-            first_hit,
         );
     }
     match view.triangles {
-        Triangles::Direct(t) => walk_permuted(stack, walk, at, t, local, ray, best, first_hit),
-        Triangles::Indexed(t) => walk_permuted(stack, walk, at, t, local, ray, best, first_hit),
+        Triangles::Direct(t) => walk_permuted::<_, FIRST>(stack, walk, at, t, local, ray, best),
+        Triangles::Indexed(t) => walk_permuted::<_, FIRST>(stack, walk, at, t, local, ray, best),
     }
 }
 
 /// [`trace_blas`] for the axis permutation of the ray and the layout of the triangles.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
-fn walk_permuted<T: LeafTriangles>(
-    stack: &mut [Entry],
+fn walk_permuted<T: LeafTriangles, const FIRST: bool>(
+    stack: &mut BlasStack,
     walk: Walk,
     at: &BlasAt,
     tris: T,
     local: &BoxRay,
     ray: &Ray,
     best: &mut Best,
-    first_hit: bool,
 ) -> bool {
     match permutation(local.direction) {
-        0 => trace_blas::<0, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
-        1 => trace_blas::<1, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
-        2 => trace_blas::<2, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
-        3 => trace_blas::<3, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
-        4 => trace_blas::<4, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
-        _ => trace_blas::<5, T, true>(stack, walk, at, tris, local, ray, best, first_hit),
+        0 => trace_blas::<0, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
+        1 => trace_blas::<1, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
+        2 => trace_blas::<2, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
+        3 => trace_blas::<3, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
+        4 => trace_blas::<4, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
+        _ => trace_blas::<5, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
     }
 }
 
@@ -483,15 +517,14 @@ struct BlasAt<'a, 's> {
 /// to itself.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool>(
-    stack: &mut [Entry],
+fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIRST: bool>(
+    stack: &mut BlasStack,
     walk: Walk,
     at: &BlasAt,
     tris: T,
     boxes: &BoxRay,
     ray: &Ray,
     best: &mut Best,
-    first_hit: bool,
 ) -> bool {
     let BlasAt { view, inst } = *at;
     let sheared = boxes.sheared::<P>();
@@ -538,7 +571,7 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool>(
                 best.barycentrics = [h.b, h.c];
                 best.front_face = front;
                 found = true;
-                if first_hit {
+                if FIRST {
                     return true;
                 }
             }
@@ -556,7 +589,7 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool>(
                 best.barycentrics = [0.0; 2];
                 best.front_face = false;
                 found = true;
-                if first_hit {
+                if FIRST {
                     return true;
                 }
             }

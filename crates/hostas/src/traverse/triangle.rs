@@ -190,20 +190,19 @@ impl ShearedRay {
         let z = row(kz);
         let x = row(kx) - f32x4::splat(self.sx) * z;
         let y = row(ky) - f32x4::splat(self.sy) * z;
-        // Lanes 0, 1 and 2 are the vertices in index order: u = cx * by - cy * bx, and so
-        // on cyclically (the padding lane is never read).
-        let next = |v: f32x4| {
-            let [a, b, c, d] = v.to_array();
-            f32x4::from([b, c, a, d])
-        };
+        // Lanes 0, 1 and 2 are the vertices in index order: lane `j` of `vwu` is the edge
+        // function of the edge from vertex `j - 1` (cyclically) to vertex `j`, the same
+        // products and difference as `intersect_axes` (lane 0 is `v = ax * cy - ay * cx`,
+        // lane 2 is `u = cx * by - cy * bx`), two shuffles in all. The padding lane is never
+        // read, and the tests on all three lanes do not depend on their order.
         let prev = |v: f32x4| {
             let [a, b, c, d] = v.to_array();
             f32x4::from([c, a, b, d])
         };
-        let uvw = prev(x) * next(y) - prev(y) * next(x);
+        let vwu = x * prev(y) - y * prev(x);
         let zero = f32x4::ZERO;
         let lanes = |m: f32x4| m.to_bitmask() & 0b111;
-        let [u, v, w, _] = uvw.to_array();
+        let [v, w, u, _] = vwu.to_array();
         let [ax, bx, cx, _] = x.to_array();
         let [ay, by, cy, _] = y.to_array();
         let [az, bz, cz, _] = z.to_array();
@@ -213,10 +212,13 @@ impl ShearedRay {
             z: [az, bz, cz],
         };
         // As in `intersect_axes`: one branch per outcome.
-        if lanes(uvw.simd_eq(zero)) != 0 {
+        if lanes(vwu.simd_eq(zero)) != 0 {
             return on_edge(self.sz, s);
         }
-        if (lanes(uvw.simd_lt(zero)) != 0) & (lanes(uvw.simd_gt(zero)) != 0) {
+        // With no zero, the signs are mixed when the sign bits are: one mask, one range
+        // check. (A NaN lane, whose sign bit is either, gives `None` either way: `hit`
+        // rejects a NaN edge function through its NaN `t`.)
+        if matches!(lanes(vwu), 1..=6) {
             return None;
         }
         hit(self.sz, &s.z, u, v, w)
