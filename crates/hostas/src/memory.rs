@@ -56,20 +56,24 @@ impl HostMemory {
             // Room to start at a huge-page boundary and to end at one (only touched pages
             // take memory; the tail of the last huge page is at most 2 MiB).
             let span = len.div_ceil(HUGE_PAGE) * HUGE_PAGE + HUGE_PAGE;
-            if let Some(mut map) = spare::take(span) {
-                let start = map.as_ptr().align_offset(HUGE_PAGE);
-                map[start..start + len].fill(0);
-                Pages::Mapped { map, start }
-            } else {
-                let map = memmap2::MmapMut::map_anon(span).map_err(|_| oom())?;
-                #[cfg(target_os = "linux")]
-                {
-                    // Only a hint: where the kernel has no huge pages it keeps small ones.
-                    let _ = map.advise(memmap2::Advice::HugePage);
+            let (mut map, reused) = match spare::take(span) {
+                Some(map) => (map, true),
+                None => {
+                    let map = memmap2::MmapMut::map_anon(span).map_err(|_| oom())?;
+                    #[cfg(target_os = "linux")]
+                    {
+                        // Only a hint: where the kernel has no huge pages it keeps small ones.
+                        let _ = map.advise(memmap2::Advice::HugePage);
+                    }
+                    (map, false)
                 }
-                let start = map.as_ptr().align_offset(HUGE_PAGE);
-                Pages::Mapped { map, start }
+            };
+            let start = map.as_ptr().align_offset(HUGE_PAGE);
+            if reused {
+                // Fresh pages are zero already; kept ones are zeroed where handed out.
+                map[start..start + len].fill(0);
             }
+            Pages::Mapped { map, start }
         } else {
             // Zeroed by the allocator (fresh pages from the OS are zero already), not by a
             // memset.

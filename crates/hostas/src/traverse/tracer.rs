@@ -320,7 +320,6 @@ fn enter<'s>(
 /// [`trace_blas`] for the axis permutation of the ray (`local`: in the instance's space).
 /// The root's children are tested first: a ray that reaches none of them (most rays that miss
 /// the structure) is done before it is prepared for triangles and the loop is entered.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn walk_blas(
     stack: &mut BlasStack,
@@ -382,7 +381,6 @@ fn walk_layout<const FIRST: bool>(
 }
 
 /// [`trace_blas`] for the axis permutation of the ray and the layout of the triangles.
-#[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn walk_permuted<T: LeafTriangles, const FIRST: bool>(
     stack: &mut BlasStack,
@@ -515,7 +513,6 @@ struct BlasAt<'a, 's> {
 /// AABBs (`TRIANGLES` false; `P` and `T` then unused), so that neither loop holds what only
 /// the other needs. Not inlined: the bottom-level loop is the hot one and gets the registers
 /// to itself.
-#[allow(clippy::too_many_arguments)]
 #[inline(never)]
 fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIRST: bool>(
     stack: &mut BlasStack,
