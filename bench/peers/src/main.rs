@@ -112,6 +112,10 @@ struct Args {
     /// --pairs).
     #[arg(long, default_value_t = 5)]
     big_pairs: usize,
+    /// Leave the 1-thread phases unpinned (by default they run on the CPU the program starts
+    /// on, as `taskset -c N` would pin them; all-thread phases use every CPU either way).
+    #[arg(long)]
+    no_pin: bool,
 }
 
 #[derive(Clone)]
@@ -152,6 +156,7 @@ fn main() {
     util::set_ftz_daz();
     let args = Args::parse();
     let started = Instant::now();
+    let pin_cpu = util::init_pinning(!args.no_pin);
     let all_threads = args.threads.unwrap_or_else(util::available_threads).max(1);
     let threads = if all_threads > 1 {
         vec![1, all_threads]
@@ -191,7 +196,7 @@ fn main() {
 
     println!("# hostas vs peers\n");
     println!(
-        "Threads: 1 and {all_threads} (machine: {} logical CPUs). Builds and refits: median of {} after {} warm-up ({} after {} for Embree HIGH and tinybvh BuildHQ; fewer on scenes of {}+ triangles, see the notes). Trace: {} primary + {} incoherent rays, closest hit, t in [0, inf), 1 thread, median of {} passes. {} FTZ/DAZ on for every thread we own.",
+        "Threads: 1 and {all_threads} (machine: {} logical CPUs). Builds and refits: median of {} after {} warm-up ({} after {} for Embree HIGH and tinybvh BuildHQ; fewer on scenes of {}+ triangles, see the notes). Trace: {} primary + {} incoherent rays, closest hit, t in [0, inf), 1 thread, median of {} passes. {} {} FTZ/DAZ on for every thread we own.",
         util::available_threads(),
         base.reps,
         base.warmup,
@@ -209,6 +214,10 @@ fn main() {
             )
         } else {
             "Paired phase off (--pairs 0).".to_string()
+        },
+        match pin_cpu {
+            Some(c) => format!("1-thread phases pinned to CPU {c} (--no-pin: not pinned)."),
+            None => "1-thread phases not pinned.".to_string(),
         }
     );
     println!(
@@ -271,6 +280,12 @@ fn main() {
             sc.tri_count(),
             load_s
         );
+        // The 1-thread phases on one CPU; each library's all-thread phase unpins itself.
+        let pinned = util::pinned();
+        notes.push(match pin_cpu {
+            Some(c) => format!("1-thread phases pinned to CPU {c}"),
+            None => "1-thread phases not pinned".to_string(),
+        });
         let mut rows = Vec::new();
         type RunFn = fn(&scene::Scene, &rays::RaySet, &Cfg) -> Vec<report::Row>;
         let libs: [(&str, RunFn); 4] = [
@@ -296,6 +311,7 @@ fn main() {
         let t0 = Instant::now();
         let paired = paired::run(&sc, &rays, &cfg);
         let paired_seconds = t0.elapsed().as_secs_f64();
+        drop(pinned);
         if !paired.is_empty() {
             eprintln!(
                 "[{:6.1}s]   paired: {} targets in {paired_seconds:.1}s",

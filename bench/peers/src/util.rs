@@ -1,4 +1,4 @@
-//! Small shared helpers: deterministic RNG, timing, medians, FTZ/DAZ.
+//! Small shared helpers: deterministic RNG, timing, medians, FTZ/DAZ, pinning.
 
 use std::time::{Duration, Instant};
 
@@ -95,4 +95,124 @@ pub fn loadavg() -> Option<f64> {
         .next()?
         .parse()
         .ok()
+}
+
+/// Where the 1-thread phases run: every library's 1-thread builds, refits and traces, and the
+/// paired phase, on one CPU (as `taskset -c N` would pin a whole 1-thread run; see
+/// `../shared/notes/perf-anchors.md`), so that the scheduler cannot move them between cores
+/// in the middle of a timing. All-thread phases run with the process's original CPU set.
+/// Threads inherit the mask of the thread that creates them, so pools and Embree devices
+/// made inside either scope get its CPUs.
+#[cfg(target_os = "linux")]
+mod affinity {
+    use std::sync::OnceLock;
+
+    /// The process's CPU set at start and the CPU the 1-thread phases are pinned to.
+    static SETS: OnceLock<(libc::cpu_set_t, Option<usize>)> = OnceLock::new();
+
+    fn get() -> Option<libc::cpu_set_t> {
+        // SAFETY: a zeroed cpu_set_t is a valid empty set; the size passed is its own.
+        unsafe {
+            let mut set: libc::cpu_set_t = std::mem::zeroed();
+            (libc::sched_getaffinity(0, std::mem::size_of_val(&set), &mut set) == 0).then_some(set)
+        }
+    }
+
+    fn set(set: &libc::cpu_set_t) {
+        // SAFETY: `set` is a valid cpu_set_t of the size passed. A failure leaves the mask as
+        // it was (the timing is then only less steady), so the result is not needed.
+        unsafe {
+            libc::sched_setaffinity(0, std::mem::size_of_val(set), set);
+        }
+    }
+
+    /// Records the original set and picks the CPU (the one the calling thread is on, when
+    /// it is in the set; `None` when pinning is off or unavailable).
+    pub fn init(pin: bool) -> Option<usize> {
+        let original = get()?;
+        // SAFETY: sched_getcpu has no preconditions.
+        let cpu = usize::try_from(unsafe { libc::sched_getcpu() }).ok();
+        // SAFETY: CPU_ISSET reads a bit of a valid set (the index is checked against its size).
+        let cpu = cpu.filter(|&c| {
+            c < libc::CPU_SETSIZE as usize && unsafe { libc::CPU_ISSET(c, &original) }
+        });
+        SETS.get_or_init(|| (original, cpu.filter(|_| pin))).1
+    }
+
+    pub fn one_cpu() -> Option<libc::cpu_set_t> {
+        let cpu = SETS.get()?.1?;
+        // SAFETY: as in `get`; CPU_SET writes a bit below CPU_SETSIZE (checked in `init`).
+        unsafe {
+            let mut s: libc::cpu_set_t = std::mem::zeroed();
+            libc::CPU_SET(cpu, &mut s);
+            Some(s)
+        }
+    }
+
+    pub fn original() -> Option<libc::cpu_set_t> {
+        SETS.get().filter(|s| s.1.is_some()).map(|s| s.0)
+    }
+
+    /// Sets `to` (when there is one) until the guard drops, then restores the mask before.
+    pub struct Guard(Option<libc::cpu_set_t>);
+
+    pub fn scope(to: Option<libc::cpu_set_t>) -> Guard {
+        let before = to.and_then(|to| {
+            let before = get();
+            set(&to);
+            before
+        });
+        Guard(before)
+    }
+
+    impl Drop for Guard {
+        fn drop(&mut self) {
+            if let Some(before) = &self.0 {
+                set(before);
+            }
+        }
+    }
+}
+
+#[cfg(not(target_os = "linux"))]
+mod affinity {
+    pub fn init(_pin: bool) -> Option<usize> {
+        None
+    }
+    pub struct Guard;
+    impl Drop for Guard {
+        fn drop(&mut self) {}
+    }
+    pub fn one_cpu() -> Option<()> {
+        None
+    }
+    pub fn original() -> Option<()> {
+        None
+    }
+    pub fn scope(_to: Option<()>) -> Guard {
+        Guard
+    }
+}
+
+/// Picks the CPU of the 1-thread phases (see `affinity`): the one the program starts on, or
+/// none with `pin` false. Returns it, for the report.
+pub fn init_pinning(pin: bool) -> Option<usize> {
+    affinity::init(pin)
+}
+
+/// Runs the enclosing scope on the 1-thread phases' CPU until the guard drops.
+#[must_use]
+pub fn pinned() -> impl Drop {
+    affinity::scope(affinity::one_cpu())
+}
+
+/// Runs the enclosing scope with `threads` threads' worth of CPUs: pinned for 1, the
+/// original set otherwise.
+#[must_use]
+pub fn cpus_for(threads: usize) -> impl Drop {
+    if threads == 1 {
+        affinity::scope(affinity::one_cpu())
+    } else {
+        affinity::scope(affinity::original())
+    }
 }

@@ -247,6 +247,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
     );
 
     for &t in &cfg.threads {
+        let _cpus = crate::util::cpus_for(t);
         let d = Device::new(t);
         for (v, row) in variants.iter().zip(rows.iter_mut()) {
             let reps = if v.slow { cfg.slow_reps } else { cfg.reps };
@@ -354,7 +355,9 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
     }
 
     if cfg.sah_proxy != crate::SahProxy::Off && !rows.is_empty() {
-        let d = Device::new(*cfg.threads.last().unwrap());
+        let n = *cfg.threads.last().unwrap();
+        let _cpus = crate::util::cpus_for(n);
+        let d = Device::new(n);
         for (v, row) in variants.iter().zip(rows.iter_mut()) {
             if v.slow && cfg.sah_proxy != crate::SahProxy::All {
                 row.sah_note = "proxy skipped for HIGH (--embree-sah-proxy all)".into();

@@ -127,6 +127,7 @@ fn run_preset(
     let (pos, idx) = (&scene.positions, &scene.indices);
     let mut kept = None;
     for &t in &cfg.threads {
+        let _cpus = crate::util::cpus_for(t);
         let pl = pool(t);
         let total = cfg.warmup + cfg.reps;
         let mut rep = 0;
@@ -238,6 +239,7 @@ fn refit(
         .map_err(|e| format!("build_sizes: {e}"))?;
     let mut scratch = vec![0u8; sizes.update_scratch_size.max(1) as usize];
     for &t in &cfg.threads {
+        let _cpus = crate::util::cpus_for(t);
         let mut flip = false;
         let mut err = None;
         let ms = pool(t).install(|| {

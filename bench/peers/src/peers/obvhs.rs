@@ -93,6 +93,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         let mut row = Row::new("obvhs", v.key, v.desc, Some(v.class));
         let mut traced = None;
         for &t in &cfg.threads {
+            let _cpus = crate::util::cpus_for(t);
             let p = pool(t);
             let ms = p.install(|| {
                 median_ms(cfg.warmup, cfg.reps, || {
@@ -116,8 +117,10 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         );
         row.bytes_note = "CWBVH nodes + index array + 48-B triangles".into();
         // SAH of obvhs's BVH2 for the same preset (untimed, all threads).
-        let bvh2 = pool(*cfg.threads.last().unwrap())
-            .install(|| build_bvh2_from_tris(&tris, (v.params)(), &mut Duration::default()));
+        let n = *cfg.threads.last().unwrap();
+        let _cpus = crate::util::cpus_for(n);
+        let bvh2 =
+            pool(n).install(|| build_bvh2_from_tris(&tris, (v.params)(), &mut Duration::default()));
         row.sah = Some(sah::sah(0, |i| {
             let n = &bvh2.nodes[i];
             let a = n.aabb();

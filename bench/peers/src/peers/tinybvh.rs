@@ -157,6 +157,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         let mut bvh2_ms = serde_json::Map::new();
         let mut kept: Option<Handle> = None;
         for &t in &cfg.threads {
+            let _cpus = crate::util::cpus_for(t);
             let (reps, warm) = if v.slow {
                 (cfg.slow_reps, cfg.slow_warmup)
             } else {
