@@ -34,8 +34,9 @@ enum Pages {
     Mapped { map: memmap2::MmapMut, start: usize },
 }
 
-/// Zeroed host memory: what a buffer is bound to, and what the convenience calls and
-/// benchmarks use for scratch ([`HostMemory::zeroed`]).
+/// Host memory: what a buffer is bound to ([`HostMemory::allocate`]: contents undefined, as
+/// after `vkAllocateMemory`), and what the convenience calls and benchmarks use for scratch
+/// ([`HostMemory::zeroed`]).
 pub struct HostMemory {
     pages: Pages,
     len: usize,
@@ -51,6 +52,20 @@ pub(crate) fn aligned_copy(bytes: &[u8]) -> Result<HostMemory> {
 impl HostMemory {
     /// `len` zero bytes, at least 64-byte aligned.
     pub fn zeroed(len: usize) -> Result<HostMemory> {
+        HostMemory::new(len, true)
+    }
+
+    /// `len` bytes, at least 64-byte aligned, whose contents are undefined as after
+    /// `vkAllocateMemory`: zeros, or (a mapping kept from memory dropped in the last seconds)
+    /// what this process last wrote there. Builds do not depend on what their memory held
+    /// (the encoder writes every byte of the structure, its gaps included), so a buffer's
+    /// memory is not zeroed again: a 70k-triangle fast build would write its structure's
+    /// megabytes twice.
+    pub fn allocate(len: usize) -> Result<HostMemory> {
+        HostMemory::new(len, false)
+    }
+
+    fn new(len: usize, zero: bool) -> Result<HostMemory> {
         let oom = || Error::OutOfHostMemory(format!("{len} bytes could not be allocated"));
         let pages = if len >= MAPPED_MIN {
             // Room to start at a huge-page boundary and to end at one (only touched pages
@@ -69,7 +84,7 @@ impl HostMemory {
                 }
             };
             let start = map.as_ptr().align_offset(HUGE_PAGE);
-            if reused {
+            if reused && zero {
                 // Fresh pages are zero already; kept ones are zeroed where handed out.
                 map[start..start + len].fill(0);
             }
@@ -199,13 +214,14 @@ impl Buffer {
             }),
         }
     }
-    /// A buffer of `size` bytes with fresh host memory bound.
+    /// A buffer of `size` bytes with host memory bound (see [`Buffer::bind_memory`]).
     pub fn new(size: u64) -> Result<Buffer> {
         let b = Buffer::new_unbound(size);
         b.bind_memory()?;
         Ok(b)
     }
-    /// Binds fresh host memory (`vkBindBufferMemory`). Binding twice is an error.
+    /// Binds host memory (`vkBindBufferMemory`), whose contents are undefined
+    /// ([`HostMemory::allocate`]). Binding twice is an error.
     pub fn bind_memory(&self) -> Result<()> {
         let mut m = self.inner.memory.lock();
         if m.is_some() {
@@ -217,7 +233,7 @@ impl Buffer {
         }
         let len = usize::try_from(self.inner.size)
             .map_err(|_| Error::OutOfHostMemory(format!("{} bytes", self.inner.size)))?;
-        *m = Some(Arc::new(RwLock::new(HostMemory::zeroed(len)?)));
+        *m = Some(Arc::new(RwLock::new(HostMemory::allocate(len)?)));
         Ok(())
     }
     pub fn size(&self) -> u64 {
@@ -312,5 +328,23 @@ mod tests {
             assert!(smaller.bytes().iter().all(|&b| b == 0));
             smaller.bytes_mut().fill(0x5a);
         }
+    }
+
+    #[test]
+    fn allocated_memory_is_aligned_and_writable_and_may_be_reused_as_it_is() {
+        let len = 3 * MAPPED_MIN + 5;
+        let mut m = HostMemory::allocate(len).unwrap();
+        assert_eq!(m.bytes().len(), len);
+        assert_eq!(m.bytes().as_ptr() as usize % HUGE_PAGE, 0);
+        m.bytes_mut().fill(0xa5);
+        drop(m);
+        // A zeroed allocation never sees what an allocated one held.
+        let z = HostMemory::zeroed(len).unwrap();
+        assert!(z.bytes().iter().all(|&b| b == 0));
+        drop(z);
+        let mut a = HostMemory::allocate(len - 7).unwrap();
+        assert_eq!(a.bytes().len(), len - 7);
+        a.bytes_mut()[len - 8] = 1;
+        assert_eq!(a.bytes()[len - 8], 1);
     }
 }

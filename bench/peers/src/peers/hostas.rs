@@ -5,9 +5,10 @@
 //!   rayon pool of 1 or all threads; the structure is destroyed untimed. The scratch is the
 //!   previous build's (`quick` keeps it, as an application keeps its scratch buffer, and as
 //!   malloc gives Embree's temporary arrays back). The structure's memory comes from hostas's
-//!   allocator, which reuses the mapping of a structure destroyed in the last 2 s (zeroing it
-//!   again) rather than have the OS fault in fresh pages: the warm-up build is the only one
-//!   that pays for fresh pages.
+//!   allocator, which reuses the mapping of a structure destroyed in the last 2 s (as it is:
+//!   buffer memory's contents are undefined, as after `vkAllocateMemory`, and builds do not
+//!   depend on them) rather than have the OS fault in fresh pages: the warm-up build is the
+//!   only one that pays for fresh pages.
 //! - Trace: `Scene::trace_closest` over a single-instance TLAS (identity transform) built with
 //!   `quick::build_single_instance_tlas`: ray queries always start at a TLAS in Vulkan, so
 //!   hostas pays for one instance level that the peers (which trace the BLAS directly) do not.
