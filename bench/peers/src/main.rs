@@ -281,7 +281,7 @@ fn main() {
             load_s
         );
         // The 1-thread phases on one CPU; each library's all-thread phase unpins itself.
-        let pinned = util::pinned();
+        let pinned = util::cpus_for(1);
         notes.push(match pin_cpu {
             Some(c) => format!("1-thread phases pinned to CPU {c}"),
             None => "1-thread phases not pinned".to_string(),

@@ -200,14 +200,8 @@ pub fn init_pinning(pin: bool) -> Option<usize> {
     affinity::init(pin)
 }
 
-/// Runs the enclosing scope on the 1-thread phases' CPU until the guard drops.
-#[must_use]
-pub fn pinned() -> impl Drop {
-    affinity::scope(affinity::one_cpu())
-}
-
-/// Runs the enclosing scope with `threads` threads' worth of CPUs: pinned for 1, the
-/// original set otherwise.
+/// Runs the enclosing scope, until the guard drops, with `threads` threads' worth of CPUs:
+/// the 1-thread phases' CPU for 1, the original set otherwise.
 #[must_use]
 pub fn cpus_for(threads: usize) -> impl Drop {
     if threads == 1 {
