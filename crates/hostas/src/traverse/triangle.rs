@@ -10,7 +10,7 @@
 //! with the same winding, exactly one owns it, and of a closed fan exactly one owns the vertex.
 
 use crate::math::Vec3;
-use wide::f32x4;
+use wide::{f32x4, f32x8};
 
 /// A ray prepared for the watertight test.
 #[derive(Clone, Copy, Debug)]
@@ -222,6 +222,76 @@ impl ShearedRay {
             return None;
         }
         hit(self.sz, &s.z, u, v, w)
+    }
+}
+
+/// Eight triangles' [`ShearedRay::intersect8`] results, lane `j` for triangle `j`.
+pub struct Hits8 {
+    pub t: f32x8,
+    pub det: f32x8,
+    /// The edge functions whose ratios to `det` are the barycentrics `b` and `c`.
+    pub v: f32x8,
+    pub w: f32x8,
+    /// Lanes the ray hits (at any `t`): what [`ShearedRay::intersect_axes`] returns `Some` for,
+    /// among the lanes not in `edge`.
+    pub hit: u32,
+    /// Lanes with an edge function exactly zero, which only the scalar test decides (its
+    /// exact recomputation and top-left rule).
+    pub edge: u32,
+}
+
+impl Hits8 {
+    /// Lane `j`'s hit, as [`ShearedRay::intersect_axes`] returns it (the same operations on
+    /// the same values: the same bits).
+    #[inline(always)]
+    pub fn lane(&self, j: usize) -> TriangleHit {
+        let j = j & 7;
+        let det = self.det.to_array()[j];
+        let rcp = 1.0 / det;
+        TriangleHit {
+            t: self.t.to_array()[j],
+            b: self.v.to_array()[j] * rcp,
+            c: self.w.to_array()[j] * rcp,
+            front_face: det > 0.0,
+        }
+    }
+}
+
+impl ShearedRay {
+    /// [`ShearedRay::intersect_axes`] for eight triangles at once: `rows[3 * i + k]` holds
+    /// component `k` of vertex `i` of each lane's triangle. Every lane takes the scalar
+    /// test's operations in the same order (no fused products), so a lane's `t`, edge
+    /// functions and determinant are the scalar test's bits.
+    #[inline(always)]
+    pub fn intersect8<const P: usize>(&self, rows: &[f32x8; 9]) -> Hits8 {
+        let (kx, ky, kz) = AXES[P];
+        let s = f32x8::splat;
+        let o = self.origin.map(s);
+        let vertex = |i: usize| [0, 1, 2].map(|k| rows[3 * i + k] - o[k]);
+        let [a, b, c] = [vertex(0), vertex(1), vertex(2)];
+        let (sx, sy) = (s(self.sx), s(self.sy));
+        let [ax, bx, cx] = [a, b, c].map(|p| p[kx] - sx * p[kz]);
+        let [ay, by, cy] = [a, b, c].map(|p| p[ky] - sy * p[kz]);
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let zero = f32x8::ZERO;
+        let edge = u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero);
+        let mixed = (u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero))
+            & (u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero));
+        let det = u + v + w;
+        let sz = s(self.sz);
+        let t = (u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz])) / det;
+        // `t == t`: not NaN. A zero determinant or mixed signs miss, as in `hit`.
+        let hit = !(edge | mixed) & det.simd_ne(zero) & t.simd_eq(t);
+        Hits8 {
+            t,
+            det,
+            v,
+            w,
+            hit: hit.to_bitmask(),
+            edge: edge.to_bitmask(),
+        }
     }
 }
 
