@@ -216,8 +216,8 @@ fn main() {
             "Paired phase off (--pairs 0).".to_string()
         },
         match pin_cpu {
-            Some(c) => format!("1-thread phases pinned to CPU {c} (--no-pin: not pinned)."),
-            None => "1-thread phases not pinned.".to_string(),
+            Some(_) => format!("{} (--no-pin: not pinned).", util::pinning_note(pin_cpu)),
+            None => format!("{}.", util::pinning_note(pin_cpu)),
         }
     );
     println!(
@@ -282,10 +282,7 @@ fn main() {
         );
         // The 1-thread phases on one CPU; each library's all-thread phase unpins itself.
         let pinned = util::cpus_for(1);
-        notes.push(match pin_cpu {
-            Some(c) => format!("1-thread phases pinned to CPU {c}"),
-            None => "1-thread phases not pinned".to_string(),
-        });
+        notes.push(util::pinning_note(pin_cpu));
         let mut rows = Vec::new();
         type RunFn = fn(&scene::Scene, &rays::RaySet, &Cfg) -> Vec<report::Row>;
         let libs: [(&str, RunFn); 4] = [

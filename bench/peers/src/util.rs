@@ -200,6 +200,14 @@ pub fn init_pinning(pin: bool) -> Option<usize> {
     affinity::init(pin)
 }
 
+/// What the report says of the pinning [`init_pinning`] chose.
+pub fn pinning_note(pin_cpu: Option<usize>) -> String {
+    match pin_cpu {
+        Some(c) => format!("1-thread phases pinned to CPU {c}"),
+        None => "1-thread phases not pinned".to_string(),
+    }
+}
+
 /// Runs the enclosing scope, until the guard drops, with `threads` threads' worth of CPUs:
 /// the 1-thread phases' CPU for 1, the original set otherwise.
 #[must_use]

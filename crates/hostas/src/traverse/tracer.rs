@@ -507,7 +507,7 @@ impl LeafTriangles for &[[f32; 9]] {
             // lines: reading the next leaves' slots took 6% fewer instructions but up to three
             // more lines per leaf (the same speed on one thread on the Xeon; traffic that all
             // threads tracing at once would share).
-            let tri = |j: usize| &window[if j < n { j } else { n - 1 } & 7];
+            let tri = |j: usize| &window[(if j < n { j } else { n - 1 }) & 7];
             let head: [f32x8; 8] = std::array::from_fn(|j| {
                 let h: [f32; 8] = bytemuck::cast_slice::<f32, [f32; 8]>(&tri(j)[..8])[0];
                 f32x8::from(h)

@@ -246,14 +246,8 @@ impl Hits8 {
     #[inline(always)]
     pub fn lane(&self, j: usize) -> TriangleHit {
         let j = j & 7;
-        let det = self.det.to_array()[j];
-        let rcp = 1.0 / det;
-        TriangleHit {
-            t: self.t.to_array()[j],
-            b: self.v.to_array()[j] * rcp,
-            c: self.w.to_array()[j] * rcp,
-            front_face: det > 0.0,
-        }
+        let lane = |x: f32x8| x.to_array()[j];
+        TriangleHit::at(lane(self.t), lane(self.det), lane(self.v), lane(self.w))
     }
 }
 
@@ -353,13 +347,22 @@ fn hit(sz: f32, z: &[f32; 3], u: f32, v: f32, w: f32) -> Option<TriangleHit> {
     if t.is_nan() {
         return None;
     }
-    let rcp = 1.0 / det;
-    Some(TriangleHit {
-        t,
-        b: v * rcp,
-        c: w * rcp,
-        front_face: det > 0.0,
-    })
+    Some(TriangleHit::at(t, det, v, w))
+}
+
+impl TriangleHit {
+    /// The hit at `t` of a triangle with determinant `det` and edge functions `v, w` (of the
+    /// edges opposite vertices 1 and 2): the barycentrics by one reciprocal, facing by sign.
+    #[inline(always)]
+    fn at(t: f32, det: f32, v: f32, w: f32) -> TriangleHit {
+        let rcp = 1.0 / det;
+        TriangleHit {
+            t,
+            b: v * rcp,
+            c: w * rcp,
+            front_face: det > 0.0,
+        }
+    }
 }
 
 #[cfg(test)]
