@@ -17,6 +17,7 @@ pub use tracer::Tracer;
 use crate::error::{Error, Location, Result};
 use crate::layout::PrimKind;
 use crate::math::Vec3;
+use wide::f32x8;
 
 /// SPIR-V `RayFlags` (`gl_RayFlags*EXT`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -71,7 +72,9 @@ impl std::ops::BitOr for RayFlags {
 
 /// A ray as `rayQueryInitializeEXT` takes it: `t` is measured along the unnormalized
 /// direction, in every space.
+/// (`repr(C)`: the fields in this order, as the validation loads its first eight floats.)
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[repr(C)]
 pub struct Ray {
     pub origin: Vec3,
     pub t_min: f32,
@@ -105,21 +108,37 @@ impl Ray {
         }
     }
 
-    /// All the rules of [`Ray::validate`] at once, without branches.
+    /// All the rules of [`Ray::validate`] at once, with one branch for rays that set more than
+    /// one of the flags the rules name.
     #[inline(always)]
     fn plainly_valid(&self) -> bool {
         let [o, d] = [self.origin, self.direction];
-        let finite =
-            (o[0] * 0.0 + o[1] * 0.0 + o[2] * 0.0) + (d[0] * 0.0 + d[1] * 0.0 + d[2] * 0.0) == 0.0;
+        // The ray's first eight floats (origin, tMin, direction, tMax: one load with
+        // `repr(C)`). `x * 0` is 0 for every finite `x` and NaN for infinities and NaN;
+        // lanes 3 and 7 (tMin, tMax) may be infinite.
+        let v = f32x8::from([o[0], o[1], o[2], self.t_min, d[0], d[1], d[2], self.t_max]);
+        let finite = v * f32x8::ZERO;
+        let finite = finite.simd_eq(f32x8::ZERO).to_bitmask() & 0x77 == 0x77;
         // False when either is NaN.
         let range = (0.0 <= self.t_min) & (self.t_min <= self.t_max);
+        // Each flag rule forbids a pair of the flags it names: a ray that sets at most one of
+        // them keeps every rule (most rays: none, or only OPAQUE or a culling flag).
+        let named = self.flags.0 & Self::RULE_FLAGS;
+        let flags = named & named.wrapping_sub(1) == 0 || self.flags_keep_the_rules();
+        finite & range & flags
+    }
+
+    /// The flag rules of [`Ray::validate`], without branches.
+    #[inline(always)]
+    fn flags_keep_the_rules(&self) -> bool {
         let f = self.flags.0;
         let skip = RayFlags::SKIP_TRIANGLES.0 | RayFlags::SKIP_AABBS.0;
-        let cull = f & Self::CULL_RULE;
-        let opacity = f & Self::OPACITY_RULE;
         let at_most_one = |m: u32| m & m.wrapping_sub(1) == 0;
-        finite & range & (f & skip != skip) & at_most_one(cull) & at_most_one(opacity)
+        (f & skip != skip) & at_most_one(f & Self::CULL_RULE) & at_most_one(f & Self::OPACITY_RULE)
     }
+
+    /// Every flag some rule of [`Ray::validate`] names.
+    const RULE_FLAGS: u32 = RayFlags::SKIP_AABBS.0 | Self::CULL_RULE | Self::OPACITY_RULE;
 
     const CULL_RULE: u32 = RayFlags::SKIP_TRIANGLES.0
         | RayFlags::CULL_BACK_FACING_TRIANGLES.0

@@ -412,7 +412,8 @@ trait LeafTriangles: TriangleSource {
     fn leaf(&self, first: usize, count: usize) -> impl Iterator<Item = impl Borrow<Self::Tri>>;
     /// [`ShearedRay::intersect_axes`] for a triangle of this layout.
     fn intersect<const P: usize>(ray: &ShearedRay, tri: &Self::Tri) -> Option<TriangleHit>;
-    /// Leaves of at least this many triangles go to [`LeafTriangles::nearest`].
+    /// Leaves of at least this many triangles go to [`LeafTriangles::nearest`] (`u32::MAX`:
+    /// none, and the bottom-level loop keeps no code for it).
     const NEAREST_FROM: u32 = u32::MAX;
     /// The hit that the loop over the `count` triangles from `first` would accept with no
     /// culling (the first in range `(t_min, t_max)` for `FIRST`, else the nearest, the
@@ -692,7 +693,8 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIR
         }
         let first = cur.child & !LEAF_BIT;
         let range = first as usize..first as usize + cur.count as usize;
-        if TRIANGLES && !culls && cur.count >= T::NEAREST_FROM {
+        // (The first two terms are constants: a layout without a wide test keeps no code for it.)
+        if TRIANGLES && T::NEAREST_FROM != u32::MAX && !culls && cur.count >= T::NEAREST_FROM {
             if let Some((k, h)) = tris.nearest::<P, FIRST>(
                 &sheared,
                 first as usize,
