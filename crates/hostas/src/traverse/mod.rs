@@ -17,7 +17,6 @@ pub use tracer::Tracer;
 use crate::error::{Error, Location, Result};
 use crate::layout::PrimKind;
 use crate::math::Vec3;
-use wide::f32x8;
 
 /// SPIR-V `RayFlags` (`gl_RayFlags*EXT`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -72,9 +71,7 @@ impl std::ops::BitOr for RayFlags {
 
 /// A ray as `rayQueryInitializeEXT` takes it: `t` is measured along the unnormalized
 /// direction, in every space.
-/// (`repr(C)`: the fields in this order, as the validation loads its first eight floats.)
 #[derive(Clone, Copy, Debug, PartialEq)]
-#[repr(C)]
 pub struct Ray {
     pub origin: Vec3,
     pub t_min: f32,
@@ -113,12 +110,11 @@ impl Ray {
     #[inline(always)]
     fn plainly_valid(&self) -> bool {
         let [o, d] = [self.origin, self.direction];
-        // The ray's first eight floats (origin, tMin, direction, tMax: one load with
-        // `repr(C)`). `x * 0` is 0 for every finite `x` and NaN for infinities and NaN;
-        // lanes 3 and 7 (tMin, tMax) may be infinite.
-        let v = f32x8::from([o[0], o[1], o[2], self.t_min, d[0], d[1], d[2], self.t_max]);
-        let finite = v * f32x8::ZERO;
-        let finite = finite.simd_eq(f32x8::ZERO).to_bitmask() & 0x77 == 0x77;
+        // Field by field: a caller has usually just stored the ray, field by field, and a
+        // load spanning several of those stores waits until they reach the cache (one
+        // 32-byte load of origin to tMax made primary rays 10-20% slower on the Xeon).
+        let finite =
+            (o[0] * 0.0 + o[1] * 0.0 + o[2] * 0.0) + (d[0] * 0.0 + d[1] * 0.0 + d[2] * 0.0) == 0.0;
         // False when either is NaN.
         let range = (0.0 <= self.t_min) & (self.t_min <= self.t_max);
         // Each flag rule forbids a pair of the flags it names: a ray that sets at most one of
