@@ -6,7 +6,9 @@ with PREFIX tr). Per scene and measure (hostas fast-trace build
 Mtris/s, fast-build build Mtris/s, primary / incoherent Mrays/s, one thread; the default
 preset's one-thread refit when present), the median over rounds of each binary, its ratio to
 Embree within the same run in parentheses (MEDIUM; LOW for the fast build; Embree's refit for
-the refit), and new ÷ old as the median of each round's ratio.
+the refit), and new ÷ old as the median of each round's ratio; then each round's paired
+medians (the run's paired phase: hostas and Embree alternated back to back), which carry none
+of the machine's drift between the two binaries' turns.
 usage: alternation.py DIR [PREFIX] > table.md
 """
 import glob
@@ -31,6 +33,8 @@ def rows(path):
         d = json.loads(line)
         if "library" in d:
             out[(d["scene"], d["library"], d["key"])] = d
+        elif "paired" in d:
+            out[(d["scene"], "paired", d["paired"])] = d
     return out
 
 
@@ -69,6 +73,32 @@ def main(folder, prefix):
             cell = lambda b: f"{med(vals[b]):.2f} ({med(rel[b]):.2f})"
             ratio = statistics.median(n / o for o, n in pairs)
             print(f"| {s} | {title} | {cell('old')} | {cell('new')} | {ratio:.3f} |")
+    paired_table(runs, rounds, scenes)
+
+
+def paired_table(runs, rounds, scenes):
+    """Each round's paired median (hostas and Embree alternated back to back within the run)
+    per binary: the ratios that carry none of the drift between the two binaries' turns."""
+    medians = {}
+    for (b, n), r in runs.items():
+        for (s, lib, key), d in r.items():
+            if lib == "paired" and d.get("median") is not None:
+                medians.setdefault((s, d["measure"]), {}).setdefault(b, {})[n] = d["median"]
+    if not medians:
+        return
+    print("\nPaired medians (hostas ÷ Embree) per round, old then new; median over rounds.\n")
+    print("| scene | measure | old per round | old | new per round | new |")
+    print("|---|---|---|--:|---|--:|")
+    for s in scenes:
+        for (scene, measure), v in sorted(medians.items()):
+            if scene != s:
+                continue
+            per = {b: [v.get(b, {}).get(n) for n in rounds] for b in ("old", "new")}
+            if not all(x is not None for b in per for x in per[b]):
+                continue
+            row = lambda b: (", ".join(f"{x:.3f}" for x in per[b]), statistics.median(per[b]))
+            (o, om), (n, nm) = row("old"), row("new")
+            print(f"| {s} | {measure} | {o} | {om:.3f} | {n} | {nm:.3f} |")
 
 
 if __name__ == "__main__":
