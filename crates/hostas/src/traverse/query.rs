@@ -186,9 +186,9 @@ pub(super) struct BoxRay {
     /// many roundings as widening the product, so the same bound; three multiplications
     /// fewer per node). Kept whole rather than as scalars broadcast per walk: a walk that
     /// receives the ray through memory then reads each with a load its store can forward
-    /// (a load spanning two of the scalars' smaller stores waits until they reach the cache;
-    /// +4% instructions under callgrind, yet primary rays 1.11 -> 1.19x Embree on Sponza and
-    /// 1.12 -> 1.24x on the conference on the Xeon, every round of six).
+    /// (the walk's prologue had loaded a scalar with a load spanning two smaller stores, which
+    /// cannot be forwarded; +4% instructions under callgrind, yet primary rays 1.11 -> 1.19x
+    /// Embree on Sponza and 1.12 -> 1.24x on the conference on the Xeon, every round of six).
     origin8: [f32x8; 3],
     inv8: [f32x8; 3],
     inv_far8: [f32x8; 3],
