@@ -100,6 +100,19 @@ struct Best {
     front_face: bool,
 }
 
+impl Best {
+    /// Makes the triangle hit `h` in stored slot `prim_slot` the nearest so far (`front`: its
+    /// facing after the instance's `FLIP_FACING`).
+    #[inline(always)]
+    fn accept_triangle(&mut self, prim_slot: u32, h: &TriangleHit, front: bool) {
+        self.t = h.t;
+        self.kind = HitKind::Triangle;
+        self.prim_slot = prim_slot;
+        self.barycentrics = [h.b, h.c];
+        self.front_face = front;
+    }
+}
+
 /// What a top level's leaves hold instead of triangles (nothing to prefetch).
 const NO_TRIANGLES: &[[f32; 9]] = &[];
 
@@ -702,11 +715,7 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIR
                 ray.t_min,
                 best.t,
             ) {
-                best.t = h.t;
-                best.kind = HitKind::Triangle;
-                best.prim_slot = first + k;
-                best.barycentrics = [h.b, h.c];
-                best.front_face = h.front_face != flip;
+                best.accept_triangle(first + k, &h, h.front_face != flip);
                 found = true;
                 if FIRST {
                     return true;
@@ -724,11 +733,7 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIR
                 if culls && culled(view, inst, flags, p, Some(front)) {
                     continue;
                 }
-                best.t = h.t;
-                best.kind = HitKind::Triangle;
-                best.prim_slot = p;
-                best.barycentrics = [h.b, h.c];
-                best.front_face = front;
+                best.accept_triangle(p, &h, front);
                 found = true;
                 if FIRST {
                     return true;
