@@ -1,12 +1,12 @@
 //! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
 //! child with the largest surface area. Primitive references are partitioned in place; large
-//! ranges stably into the second array, whose next partition of each side moves it back, so
-//! the final order is the order of `refs` on return. Small ranges are split with an exact SAH
+//! ranges into the second array (left side in order, right side backwards), whose next
+//! partition of each side moves it back, so the final order is the order of `refs` on return. Small ranges are split with an exact SAH
 //! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
 //! sweep split hands its sides their orders. Ranges of 16,384 or more are binned on every
-//! fourth or eighth reference ([`SAMPLE_FROM`]); their partitions compute the sides' bounds,
-//! and above `LARGE` place the right side from the end backwards (no counting pass on one
-//! thread).
+//! fourth or eighth reference ([`SAMPLE_FROM`]); their partitions compute the sides' bounds
+//! (which is why large ones need no counting pass on one thread: the bins do not count the
+//! sides, and the right side is placed from the end).
 //!
 //! While the builder runs, each reference holds its bounds as `(lo, -hi)` ([`Box8`]): negated
 //! once on entry (with the pass that bounds the root) and restored on return, instead of on
@@ -655,10 +655,14 @@ struct Sides {
     bounds: Option<(Aabb, Aabb)>,
 }
 
-/// Ranges of more than this many primitives are partitioned stably, through the other array.
+/// Ranges of more than this many primitives are partitioned through the other array, left
+/// side in order and right side backwards ([`mirrored_partition`]).
 const LARGE: usize = PARALLEL_THRESHOLD * 16;
+// Every large range is binned on a sample, so its partition computes its sides' bounds
+// ([`partition_by`] relies on it).
+const _: () = assert!(SAMPLE_FROM <= LARGE);
 
-/// Where a range's references are: in `refs`, their final place, or in `aux`, where a stable
+/// Where a range's references are: in `refs`, their final place, or in `aux`, where the
 /// partition of a large range leaves both sides (copying them back would be one more pass over
 /// the range; the next partition of each side moves it back instead).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -679,7 +683,7 @@ impl At {
     /// Moves a range's references to `refs` if they are in `aux`.
     #[inline(always)]
     fn settle(self, refs: &mut [PrimRef], aux: &[PrimRef]) {
-        // Rare: only where a stable partition made a small side.
+        // Rare: only where a large range's partition made a small side.
         #[cold]
         #[inline(never)]
         fn copy_back(refs: &mut [PrimRef], aux: &[PrimRef]) {
@@ -694,13 +698,13 @@ impl At {
 /// The chunks a large range is partitioned in.
 const CHUNK: usize = PARALLEL_THRESHOLD * 4;
 
-/// Partitions a large range on all threads from `src` into `dst`: count each chunk's left
-/// side, then scatter every chunk into `dst` at its prefix-sum positions. The result is the
-/// same as a sequential stable partition, whatever the thread count; when `BOXES` (a range
-/// binned on a sample), the same as [`mirrored_partition`] instead: the right side from the
-/// end of `dst` backwards. Returns the size of the left side and what it found out about
-/// both sides, grown chunk by chunk.
-fn parallel_partition<const A: usize, const BOXES: bool>(
+/// Partitions a large range (always binned on a sample, see [`SAMPLE_FROM`]) on all threads
+/// from `src` into `dst`: count each chunk's left side, then scatter every chunk into `dst` at
+/// its prefix-sum positions, left ones from the start in order, right ones from the end
+/// backwards. The result is the same as [`mirrored_partition`]'s, whatever the thread count.
+/// Returns the size of the left side and what it found out about both sides (their bounds
+/// included), grown chunk by chunk.
+fn parallel_partition<const A: usize>(
     src: &[PrimRef],
     dst: &mut [PrimRef],
     plane: Plane<A>,
@@ -716,17 +720,12 @@ fn parallel_partition<const A: usize, const BOXES: bool>(
     for (i, n) in lefts.iter().enumerate() {
         let len = CHUNK.min(src.len() - i * CHUNK);
         let (lp, lrest) = left_part.split_at_mut(*n);
-        let (rp, rrest) = if BOXES {
-            let (rrest, rp) = right_part.split_at_mut(right_part.len() - (len - n));
-            (rp, rrest)
-        } else {
-            right_part.split_at_mut(len - n)
-        };
+        let (rrest, rp) = right_part.split_at_mut(right_part.len() - (len - n));
         pieces.push((lp, rp));
         left_part = lrest;
         right_part = rrest;
     }
-    let infos: Vec<SideBounds<BOXES>> = src
+    let infos: Vec<SideBounds<true>> = src
         .par_chunks(CHUNK)
         .zip(pieces.into_par_iter())
         .map(|(c, (lp, rp))| {
@@ -739,8 +738,7 @@ fn parallel_partition<const A: usize, const BOXES: bool>(
                     lp[li] = *r;
                     li += 1;
                 } else {
-                    let at = if BOXES { rp.len() - 1 - ri } else { ri };
-                    rp[at] = *r;
+                    rp[rp.len() - 1 - ri] = *r;
                     ri += 1;
                 }
             }
@@ -754,8 +752,8 @@ fn parallel_partition<const A: usize, const BOXES: bool>(
     (total_left, all.sides())
 }
 
-/// Partitions a large range binned on a sample (whose bins do not count the sides) from `src`
-/// into `dst` on the calling thread, without a counting pass: left references from the start
+/// Partitions a large range (always binned on a sample, whose bins neither count nor bound
+/// the sides) from `src` into `dst` on the calling thread, without a counting pass: left references from the start
 /// of `dst` in order, right ones from its end backwards. Chunk by chunk, so that the sides'
 /// bounds are grown in the same grouping as [`parallel_partition`] grows them (with a NaN,
 /// `fmin` is not associative): the same bytes on every thread count.
@@ -787,35 +785,6 @@ fn mirrored_partition<const A: usize>(
     (li, all.sides())
 }
 
-/// Stable partition from `src` into `dst` in one pass, given the size of the left side; `None`
-/// if `left` turns out not to be it.
-fn stable_partition<const A: usize>(
-    src: &[PrimRef],
-    dst: &mut [PrimRef],
-    left: usize,
-    plane: Plane<A>,
-) -> Option<(usize, Sides)> {
-    let dst = &mut dst[..src.len()];
-    let mut sides = SideBounds::<false>::EMPTY;
-    let (mut li, mut ri) = (0, left);
-    for r in src {
-        let (v, p, right) = plane.classify(r);
-        sides.grow(v, p, right);
-        // -1 (all bits, as `usize`) when right, 0 when left: one of the cursors advances.
-        let right_lane = mask_lane(right);
-        let at = if right_lane == 0 { li } else { ri };
-        if let Some(d) = dst.get_mut(at) {
-            *d = bytemuck::cast(v);
-        }
-        li = li.wrapping_add(1).wrapping_add(right_lane);
-        ri = ri.wrapping_sub(right_lane);
-    }
-    if li != left {
-        return None;
-    }
-    Some((left, sides.sides()))
-}
-
 /// Partitions a range into `refs` with those left of `plane` first, reading it from `aux`
 /// when `FROM_AUX` (else in place); returns the size of the left side and the centroid
 /// bounds of both sides. Branch-free (Lomuto with an unconditional swap, bounds grown with
@@ -843,37 +812,29 @@ fn partition<const A: usize, const FROM_AUX: bool, const BOXES: bool>(
     (i, sides.sides())
 }
 
-/// Partitions a range at `at` by `plane`, given the counts of the bins left of it: large
-/// ones stably into the other array, the others into `refs` (in place when there). Returns
-/// the size of the left side, what it found out about the sides (their bounds when
-/// `BOXES`: the bins were filled from a sample, so neither their counts nor their bounds are
-/// the sides') and where the sides are.
+/// Partitions a range at `at` by `plane`: large ones into the other array (with the sides'
+/// bounds: a large range is always binned on a sample), the others into `refs` (in place when
+/// there). Returns the size of the left side, what it found out about the sides (their bounds
+/// when `BOXES`: the bins were filled from a sample, so they do not bound the sides) and where
+/// the sides are.
 fn partition_by<const A: usize, const BOXES: bool>(
     refs: &mut [PrimRef],
     aux: &mut [PrimRef],
     at: At,
     plane: Plane<A>,
-    left_counts: &[Count],
 ) -> (usize, Sides, At) {
     if refs.len() > LARGE {
         let (src, dst, to) = match at {
             At::Refs => (&*refs, aux, At::Aux),
             At::Aux => (&*aux, refs, At::Refs),
         };
-        // On one thread the bins' counts give the left side's size, so no counting pass.
-        // (Every stable partition is the same: the bytes do not depend on the path. The
-        // sides' bounds are grown chunk by chunk in either thread count, see
-        // `parallel_partition`, so they do not either.)
-        let single = if rayon::current_num_threads() > 1 {
-            None
-        } else if BOXES {
-            Some(mirrored_partition(src, dst, plane))
+        // Both place the sides alike and grow their bounds chunk by chunk: the bytes do not
+        // depend on the path.
+        let (mid, sides) = if rayon::current_num_threads() > 1 {
+            parallel_partition(src, dst, plane)
         } else {
-            let counted: u32 = left_counts.iter().map(|c| c.0).sum();
-            stable_partition(src, dst, counted as usize, plane)
+            mirrored_partition(src, dst, plane)
         };
-        let (mid, sides) =
-            single.unwrap_or_else(|| parallel_partition::<A, BOXES>(src, dst, plane));
         return (mid, sides, to);
     }
     let (mid, sides) = match at {
@@ -905,14 +866,13 @@ fn binned_split_n<const N: usize>(
         info.centroids.lo[axis],
         info.centroids.hi[axis],
     );
-    let left_counts = &bins.counts[axis][..bin];
     let (mid, sides, at) = match (axis, stride > 1) {
-        (0, false) => partition_by::<0, false>(refs, aux, at, Plane::new(t), left_counts),
-        (1, false) => partition_by::<1, false>(refs, aux, at, Plane::new(t), left_counts),
-        (_, false) => partition_by::<2, false>(refs, aux, at, Plane::new(t), left_counts),
-        (0, true) => partition_by::<0, true>(refs, aux, at, Plane::new(t), left_counts),
-        (1, true) => partition_by::<1, true>(refs, aux, at, Plane::new(t), left_counts),
-        (_, true) => partition_by::<2, true>(refs, aux, at, Plane::new(t), left_counts),
+        (0, false) => partition_by::<0, false>(refs, aux, at, Plane::new(t)),
+        (1, false) => partition_by::<1, false>(refs, aux, at, Plane::new(t)),
+        (_, false) => partition_by::<2, false>(refs, aux, at, Plane::new(t)),
+        (0, true) => partition_by::<0, true>(refs, aux, at, Plane::new(t)),
+        (1, true) => partition_by::<1, true>(refs, aux, at, Plane::new(t)),
+        (_, true) => partition_by::<2, true>(refs, aux, at, Plane::new(t)),
     };
     if mid == 0 || mid == refs.len() {
         return (None, at);
