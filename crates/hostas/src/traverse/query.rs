@@ -7,7 +7,7 @@
 //! the layout's depth bound.
 
 use super::scene::Scene;
-use super::triangle::ShearedRay;
+use super::triangle::{AXES, ShearedRay};
 use super::{Ray, RayFlags};
 use crate::error::{Error, Location, Result};
 use crate::layout::triangles::TriangleSource;
@@ -190,8 +190,8 @@ pub(super) struct BoxRay {
     /// cannot be forwarded; +4% instructions under callgrind, yet primary rays 1.11 -> 1.19x
     /// Embree on Sponza and 1.12 -> 1.24x on the conference on the Xeon, every round of six).
     origin8: [f32x8; 3],
-    inv8: [f32x8; 3],
-    inv_far8: [f32x8; 3],
+    neg_inv8: [f32x8; 3],
+    neg_inv_far8: [f32x8; 3],
     /// Per axis, the row of a node (seen as [`Node::rows`]) that holds the children's near
     /// and far planes, chosen once per ray: the `hi_` row when the ray goes towards smaller
     /// values (odd rows are `hi_`).
@@ -212,47 +212,67 @@ impl BoxRay {
             direction: dir,
             inv,
             origin8: origin.map(f32x8::splat),
-            inv8: inv.map(f32x8::splat),
-            inv_far8: inv.map(|i| f32x8::splat(i * ROBUST_FAR)),
+            neg_inv8: inv.map(|i| f32x8::splat(-i)),
+            neg_inv_far8: inv.map(|i| f32x8::splat(-(i * ROBUST_FAR))),
             near_row: [0, 1, 2].map(|k| lo[k] + neg[k]),
             far_row: [0, 1, 2].map(|k| lo[k] + (neg[k] ^ 1)),
         }
     }
 
     /// The same ray prepared for the watertight triangle test, for a ray whose
-    /// [`permutation`](super::triangle::permutation) is `P` (reusing the inverse).
+    /// [`permutation`](super::triangle::permutation) is `P` (reusing the inverse), or any
+    /// ray for [`ANY_AXES`].
     #[inline(always)]
     pub(super) fn sheared<const P: usize>(&self) -> ShearedRay {
-        ShearedRay::for_axes::<P>(self.origin, self.direction, self.inv)
+        if P < ANY_AXES {
+            ShearedRay::for_axes::<P>(self.origin, self.direction, self.inv)
+        } else {
+            ShearedRay::new(self.origin, self.direction)
+        }
     }
 
     /// Entry distances of the children of `node` and the mask of those the segment
     /// `[t_min, t_max]` reaches (inclusive at both ends). Empty slots have inverted boxes and
     /// never hit. All eight slabs at once (`wide`: AVX, or two SSE halves).
     #[inline(always)]
-    pub(super) fn node(&self, n: &Node, t_min: f32, t_max: f32) -> (u32, [f32; WIDTH]) {
+    pub(super) fn node<const P: usize>(
+        &self,
+        n: &Node,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; WIDTH]) {
         let rows = n.rows();
         // `& 7`: the rows are eight, so the index needs no bounds check.
         let row = |r: u32| f32x8::from(rows[r as usize & 7]);
-        let [nx, ny, nz] = self.near_row.map(row);
-        let [fx, fy, fz] = self.far_row.map(row);
+        let (mut near_row, mut far_row) = (self.near_row, self.far_row);
+        if P < ANY_AXES {
+            // The permutation fixes the dominant axis and its direction (`P & 1`: towards
+            // smaller values), so that axis's rows are constant offsets: two row offsets
+            // fewer for the walk to keep.
+            let (_, _, kz) = AXES[P];
+            let neg = (P & 1) as u32;
+            near_row[kz] = Node::LO_ROWS[kz] as u32 + neg;
+            far_row[kz] = Node::LO_ROWS[kz] as u32 + (neg ^ 1);
+        }
+        let [nx, ny, nz] = near_row.map(row);
+        let [fx, fy, fz] = far_row.map(row);
         let s = f32x8::splat;
         let [ox, oy, oz] = self.origin8;
-        let [ix, iy, iz] = self.inv8;
-        let [jx, jy, jz] = self.inv_far8;
+        let [ix, iy, iz] = self.neg_inv8;
+        let [jx, jy, jz] = self.neg_inv_far8;
         // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval
         // unbounded on that axis (`fmax8(term, acc)` is `acc` when `term` is NaN). Capping
         // the far end at f32::MAX also rejects a ray parallel to a slab it is outside of,
         // which enters at +inf.
         let near = fmax8(
-            (nx - ox) * ix,
-            fmax8((ny - oy) * iy, fmax8((nz - oz) * iz, s(t_min))),
+            (ox - nx) * ix,
+            fmax8((oy - ny) * iy, fmax8((oz - nz) * iz, s(t_min))),
         );
         let far = fmin8(
-            (fx - ox) * jx,
+            (ox - fx) * jx,
             fmin8(
-                (fy - oy) * jy,
-                fmin8((fz - oz) * jz, s(fmin(prune_limit(t_max), f32::MAX))),
+                (oy - fy) * jy,
+                fmin8((oz - fz) * jz, s(fmin(prune_limit(t_max), f32::MAX))),
             ),
         );
         (near.simd_le(far).to_bitmask(), near.to_array())
@@ -321,7 +341,7 @@ impl<'s> Level<'s> {
             // The batch tracer's ordering (farthest deepest), with the nearest pushed too.
             let stack = &mut *self.stack;
             let mut sp = stack.len;
-            let nearest = descend(
+            let nearest = descend::<ANY_AXES>(
                 &mut stack.items,
                 &mut sp,
                 self.view.nodes,
@@ -342,12 +362,18 @@ impl<'s> Level<'s> {
 
 const _: () = assert!(WIDTH == 8, "the node test is written for f32x8");
 
+/// For [`descend`] and [`BoxRay::node`]: a ray of any axis permutation (one that is not known
+/// at compile time).
+pub(super) const ANY_AXES: usize = AXES.len();
+
 /// Tests the children of node `index`: returns the nearest one the segment reaches, having
 /// pushed the others (farthest deepest), or `None` when it reaches none. `triangles` are the
-/// structure's triangles (empty when its leaves hold other primitives), for prefetching.
+/// structure's triangles (empty when its leaves hold other primitives), for prefetching. `P`
+/// is the ray's axis permutation ([`permutation`](super::triangle::permutation)) where the
+/// caller knows it at compile time, else [`ANY_AXES`].
 #[inline(always)]
 #[allow(clippy::too_many_arguments)]
-pub(super) fn descend(
+pub(super) fn descend<const P: usize>(
     stack: &mut [Entry],
     sp: &mut usize,
     nodes: &[Node],
@@ -361,7 +387,7 @@ pub(super) fn descend(
     // The children's references are read only once the test has picked them: their line is
     // requested now, so that its miss overlaps the planes' instead of following them.
     crate::math::prefetch(&node.child);
-    let (mut mask, t) = ray.node(node, t_min, t_max);
+    let (mut mask, t) = ray.node::<P>(node, t_min, t_max);
     if mask == 0 {
         return None;
     }
@@ -863,4 +889,75 @@ fn test_aabb(
         return None;
     }
     Some(c)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::traverse::triangle::permutation;
+    use rand::{Rng, SeedableRng};
+
+    /// The node test of a walk instantiated for the ray's permutation reads the dominant
+    /// axis's planes at constant rows; it must give the bits of the test that reads every row
+    /// from the ray, for every direction: signed zeros (a zero direction included), ties
+    /// between magnitudes, rays in a slab's plane.
+    #[test]
+    fn node_test_for_the_permutation_matches_the_general_one() {
+        fn node_for<const P: usize>(r: &BoxRay, n: &Node, t: f32) -> (u32, [u32; WIDTH]) {
+            let (mask, near) = r.node::<P>(n, 0.0, t);
+            (mask, near.map(f32::to_bits))
+        }
+        fn node_by_permutation(r: &BoxRay, n: &Node, t: f32) -> (u32, [u32; WIDTH]) {
+            match permutation(r.direction) {
+                0 => node_for::<0>(r, n, t),
+                1 => node_for::<1>(r, n, t),
+                2 => node_for::<2>(r, n, t),
+                3 => node_for::<3>(r, n, t),
+                4 => node_for::<4>(r, n, t),
+                _ => node_for::<5>(r, n, t),
+            }
+        }
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(0x5eed_a5e5);
+        let mut node = Node::EMPTY;
+        for k in 0..WIDTH - 1 {
+            let lo = [0; 3].map(|_| rng.gen_range(-2.0f32..1.0));
+            let hi = lo.map(|l| l + rng.gen_range(0.0f32..2.0));
+            node.set_bounds(k, &crate::math::Aabb { lo, hi });
+        }
+        let values = [0.0, -0.0, 1.0, -1.0, 0.5, -0.5];
+        let mut dirs: Vec<Vec3> = Vec::new();
+        for x in values {
+            for y in values {
+                for z in values {
+                    dirs.push([x, y, z]);
+                }
+            }
+        }
+        dirs.extend((0..2000).map(|_| [0; 3].map(|_| rng.gen_range(-1.0f32..1.0))));
+        let mut hits = 0;
+        for d in dirs {
+            // Origins inside, outside and on the children's planes.
+            for o in [
+                [0.0; 3],
+                [-2.0, 0.5, 3.0],
+                node.bounds(0).lo,
+                node.bounds(1).hi,
+            ] {
+                let r = BoxRay::new(o, d);
+                for t in [f32::INFINITY, 1.0] {
+                    let general = node_for::<ANY_AXES>(&r, &node, t);
+                    assert_eq!(
+                        node_by_permutation(&r, &node, t),
+                        general,
+                        "o {o:?} d {d:?}"
+                    );
+                    hits += general.0.count_ones();
+                }
+            }
+        }
+        assert!(
+            hits > 1000,
+            "the rays hit {hits} children: too few to compare"
+        );
+    }
 }

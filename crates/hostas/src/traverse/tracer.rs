@@ -8,7 +8,7 @@
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
 use super::query::{
-    BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
+    ANY_AXES, BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
 };
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::{ShearedRay, TriangleHit, permutation};
@@ -205,7 +205,7 @@ impl<'s> Tracer<'s> {
         };
         'top: loop {
             if cur.child & LEAF_BIT == 0 {
-                if let Some(next) = descend(
+                if let Some(next) = descend::<ANY_AXES>(
                     stack,
                     &mut sp,
                     tlas.nodes,
@@ -345,7 +345,7 @@ fn walk_blas(
 ) -> bool {
     let mut sp = 0;
     let view = at.view;
-    let Some(cur) = descend(
+    let Some(cur) = descend::<ANY_AXES>(
         stack,
         &mut sp,
         view.nodes,
@@ -377,8 +377,9 @@ fn walk_layout<const FIRST: bool>(
 ) -> bool {
     let view = at.view;
     if view.prim_kind != PrimKind::Triangles {
-        // AABBs: no triangle test, so neither permutation nor triangle layout matters.
-        return trace_blas::<0, &[[f32; 9]], false, FIRST>(
+        // AABBs: no triangle test, so neither permutation nor triangle layout matters (and
+        // one walk serves every ray).
+        return trace_blas::<ANY_AXES, &[[f32; 9]], false, FIRST>(
             stack,
             walk,
             at,
@@ -663,10 +664,11 @@ struct BlasAt<'a, 's> {
 }
 
 /// Continues the walk of one instance's bottom-level structure (its entries on `stack` below
-/// `walk.sp`), updating `best`. Returns whether it accepted a hit. Instantiated per axis permutation `P`
-/// of the ray (`permutation(boxes.direction) == P`), so that preparing the ray for the
-/// triangle test and the test itself index nothing at run time, and apart for a structure of
-/// AABBs (`TRIANGLES` false; `P` and `T` then unused), so that neither loop holds what only
+/// `walk.sp`), updating `best`. Returns whether it accepted a hit. Instantiated per axis
+/// permutation `P` of the ray (`permutation(boxes.direction) == P`), so that preparing the ray
+/// for the triangle test and the test itself index nothing at run time, and the node test
+/// reads the dominant axis's planes at constant offsets; and apart for a structure of AABBs
+/// (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop holds what only
 /// the other needs. Not inlined: the bottom-level loop is the hot one and gets the registers
 /// to itself.
 #[inline(never)]
@@ -690,7 +692,7 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIR
     let mut found = false;
     loop {
         if cur.child & LEAF_BIT == 0 {
-            if let Some(next) = descend(
+            if let Some(next) = descend::<P>(
                 stack, &mut sp, view.nodes, tris, cur.child, boxes, ray.t_min, best.t,
             ) {
                 cur = next;

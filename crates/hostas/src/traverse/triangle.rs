@@ -64,13 +64,16 @@ pub fn permutation(dir: Vec3) -> usize {
     // comparisons and selects it replaces).
     let a = dir.map(f32::abs);
     let ge = f32x4::from([a[0], a[0], a[1], 0.0]).simd_ge(f32x4::from([a[1], a[2], a[2], 0.0]));
-    let down = f32x4::from([dir[0], dir[1], dir[2], 0.0]).simd_lt(f32x4::ZERO);
-    let index = (ge.to_bitmask() & 7) | (down.to_bitmask() & 7) << 3;
+    // Signs as the box test sees them (the sign of `1 / d`, so -0 points down): a walk
+    // instantiated for `P` reads the dominant axis's planes by it.
+    let down = f32x4::from([dir[0], dir[1], dir[2], 0.0]).to_bitmask();
+    let index = (ge.to_bitmask() & 7) | (down & 7) << 3;
     PERMUTATION_OF[index as usize & 63] as usize
 }
 
 /// [`permutation`] by `a0 >= a1 | a0 >= a2 << 1 | a1 >= a2 << 2 | (signs of x, y, z) << 3`
-/// (`a` the magnitudes of the direction, a sign bit set when the component is below zero).
+/// (`a` the magnitudes of the direction, a sign bit set when the component is negative, -0
+/// included).
 const PERMUTATION_OF: [u8; 64] = {
     let mut table = [0; 64];
     let mut i = 0;
@@ -402,7 +405,7 @@ mod tests {
                     } else {
                         2
                     };
-                    let perm = 2 * kz + usize::from(d[kz] < 0.0);
+                    let perm = 2 * kz + usize::from(d[kz].is_sign_negative());
                     assert_eq!(permutation(d), perm, "{d:?}");
                     let inv = d.map(|c| 1.0 / c);
                     let o = [0.5, -0.25, 2.0];
