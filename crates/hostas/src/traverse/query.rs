@@ -201,14 +201,21 @@ pub(super) struct BoxRay {
     far_row: [u32; 3],
 }
 
+/// The rows of [`Node::rows`] holding the children's near and far planes on axis `k` for a
+/// ray going towards smaller values on it (`down` 1: the `hi_` row is near) or not (`down` 0).
+#[inline(always)]
+fn slab_rows(k: usize, down: u32) -> (u32, u32) {
+    let lo = Node::LO_ROWS[k] as u32;
+    (lo + down, lo + (down ^ 1))
+}
+
 impl BoxRay {
     pub(super) fn new(origin: Vec3, dir: Vec3) -> BoxRay {
         // A zero component gives an infinite inverse: a slab the origin is outside of gives
         // +-inf (never entered), and a ray lying exactly in a slab's plane gives 0 * inf = NaN,
         // which the min/max below drop (the ray is inside that slab, boundaries included).
         let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
-        let neg = inv.map(|i| u32::from(i.is_sign_negative()));
-        let lo = Node::LO_ROWS.map(|r| r as u32);
+        let rows = [0, 1, 2].map(|k| slab_rows(k, u32::from(inv[k].is_sign_negative())));
         BoxRay {
             origin,
             direction: dir,
@@ -216,8 +223,8 @@ impl BoxRay {
             origin8: origin.map(f32x8::splat),
             neg_inv8: inv.map(|i| f32x8::splat(-i)),
             neg_inv_far8: inv.map(|i| f32x8::splat(-(i * ROBUST_FAR))),
-            near_row: [0, 1, 2].map(|k| lo[k] + neg[k]),
-            far_row: [0, 1, 2].map(|k| lo[k] + (neg[k] ^ 1)),
+            near_row: rows.map(|(near, _)| near),
+            far_row: rows.map(|(_, far)| far),
         }
     }
 
@@ -252,9 +259,7 @@ impl BoxRay {
             // smaller values), so that axis's rows are constant offsets: two row offsets
             // fewer for the walk to keep.
             let (_, _, kz) = AXES[P];
-            let neg = (P & 1) as u32;
-            near_row[kz] = Node::LO_ROWS[kz] as u32 + neg;
-            far_row[kz] = Node::LO_ROWS[kz] as u32 + (neg ^ 1);
+            (near_row[kz], far_row[kz]) = slab_rows(kz, (P & 1) as u32);
         }
         let [nx, ny, nz] = near_row.map(row);
         let [fx, fy, fz] = far_row.map(row);
