@@ -58,7 +58,7 @@ struct Args {
     /// default fast_trace low_memory refit).
     #[arg(long, value_delimiter = ',')]
     variants: Option<Vec<String>>,
-    /// Timed build and refit repetitions (median), after --warmup untimed ones.
+    /// Timed build repetitions (median), after --warmup untimed ones.
     #[arg(long, default_value_t = 5)]
     reps: usize,
     #[arg(long, default_value_t = 1)]
@@ -69,6 +69,12 @@ struct Args {
     /// Warm-up repetitions on big scenes (the median of 3 already drops one cold outlier).
     #[arg(long, default_value_t = 0)]
     big_warmup: usize,
+    /// Timed refit repetitions (median), after --refit-warmup untimed ones, on every scene:
+    /// a refit takes milliseconds, and the lent machine's refit times spread widely.
+    #[arg(long, default_value_t = 11)]
+    refit_reps: usize,
+    #[arg(long, default_value_t = 1)]
+    refit_warmup: usize,
     /// Repetitions for the spatial-split builders (Embree HIGH, tinybvh BuildHQ).
     #[arg(long, default_value_t = 3)]
     slow_reps: usize,
@@ -125,6 +131,8 @@ pub struct Cfg {
     pub reps: usize,
     pub slow_warmup: usize,
     pub slow_reps: usize,
+    pub refit_warmup: usize,
+    pub refit_reps: usize,
     pub passes: usize,
     pub refit: bool,
     pub trace: bool,
@@ -175,6 +183,8 @@ fn main() {
         reps: args.reps.max(1),
         slow_warmup: args.slow_warmup,
         slow_reps: args.slow_reps.max(1),
+        refit_warmup: args.refit_warmup,
+        refit_reps: args.refit_reps.max(1),
         passes: args.passes.max(1),
         refit: !args.no_refit,
         trace: !args.no_trace,
@@ -196,13 +206,15 @@ fn main() {
 
     println!("# hostas vs peers\n");
     println!(
-        "Threads: 1 and {all_threads} (machine: {} logical CPUs). Builds and refits: median of {} after {} warm-up ({} after {} for Embree HIGH and tinybvh BuildHQ; fewer on scenes of {}+ triangles, see the notes). Trace: {} primary + {} incoherent rays, closest hit, t in [0, inf), 1 thread, median of {} passes. {} {} FTZ/DAZ on for every thread we own.",
+        "Threads: 1 and {all_threads} (machine: {} logical CPUs). Builds: median of {} after {} warm-up ({} after {} for Embree HIGH and tinybvh BuildHQ; fewer on scenes of {}+ triangles, see the notes). Refits: median of {} after {} warm-up, every scene. Trace: {} primary + {} incoherent rays, closest hit, t in [0, inf), 1 thread, median of {} passes. {} {} FTZ/DAZ on for every thread we own.",
         util::available_threads(),
         base.reps,
         base.warmup,
         base.slow_reps,
         base.slow_warmup,
         args.big_tris,
+        base.refit_reps,
+        base.refit_warmup,
         args.rays * args.rays,
         args.rays * args.rays,
         base.passes,
@@ -262,7 +274,7 @@ fn main() {
                 cfg.build_pairs = args.big_pairs.max(1);
             }
             notes.push(format!(
-                "big scene: builds and refits median of {} after {} warm-up ({} for Embree HIGH / tinybvh BuildHQ); {} build pairs",
+                "big scene: builds median of {} after {} warm-up ({} for Embree HIGH / tinybvh BuildHQ); {} build pairs",
                 cfg.reps, cfg.warmup, cfg.slow_reps, cfg.build_pairs
             ));
         }

@@ -296,7 +296,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             );
             unsafe { rtcCommitScene(s) };
             let mut flip = false;
-            let ms = median_ms(cfg.warmup, cfg.reps, || {
+            let ms = median_ms(cfg.refit_warmup, cfg.refit_reps, || {
                 flip = !flip;
                 buf.copy_from_slice(if flip { &moved } else { &verts });
                 let ((), dt) = time(|| unsafe {

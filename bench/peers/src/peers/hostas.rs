@@ -244,7 +244,7 @@ fn refit(
         let mut flip = false;
         let mut err = None;
         let ms = pool(t).install(|| {
-            median_ms(cfg.warmup, cfg.reps, || {
+            median_ms(cfg.refit_warmup, cfg.refit_reps, || {
                 flip = !flip;
                 let p: &[[f32; 3]] = if flip { &moved } else { orig };
                 let (r, dt) = time(|| update(device, blas, flags, p, idx, &mut scratch));

@@ -238,7 +238,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
         let moved = scene.soup4(&crate::scene::deformed(scene));
         let h = unsafe { tbp_refit_new(buf.as_ptr() as *const f32, n) };
         let mut flip = false;
-        let ms = median_ms(cfg.warmup, cfg.reps, || {
+        let ms = median_ms(cfg.refit_warmup, cfg.refit_reps, || {
             flip = !flip;
             buf.copy_from_slice(if flip { &moved } else { &soup });
             time(|| unsafe { tbp_refit(h) }).1
