@@ -1,12 +1,12 @@
-//! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the
-//! child with the largest surface area. Primitive references are partitioned in place; large
-//! ranges into the second array (left side in order, right side backwards), whose next
-//! partition of each side moves it back, so the final order is the order of `refs` on return. Small ranges are split with an exact SAH
-//! sweep over sorted centroids instead of bins; their centroids are sorted once, and each
-//! sweep split hands its sides their orders. Ranges of 16,384 or more are binned on every
-//! fourth or eighth reference ([`SAMPLE_FROM`]); their partitions compute the sides' bounds
-//! (which is why large ones need no counting pass on one thread: the bins do not count the
-//! sides, and the right side is placed from the end).
+//! Top-down binned SAH builder (Wald 2007), filling 8-wide nodes by repeatedly splitting the child
+//! with the largest surface area. Primitive references are partitioned in place; large ranges into
+//! the second array (left side in order, right side backwards), whose next partition of each side
+//! moves it back, so the final order is the order of `refs` on return. Small ranges are split with
+//! an exact SAH sweep over sorted centroids instead of bins; their centroids are sorted once, and
+//! each sweep split hands its sides their orders. Ranges of 16,384 or more are binned on every
+//! fourth or eighth reference ([`SAMPLE_FROM`]); their partitions compute the sides' bounds (which
+//! is why large ones need no counting pass on one thread: the bins do not count the sides, and the
+//! right side is placed from the end).
 //!
 //! While the builder runs, each reference holds its bounds as `(lo, -hi)` ([`Box8`]): negated
 //! once on entry (with the pass that bounds the root) and restored on return, instead of on
@@ -753,10 +753,10 @@ fn parallel_partition<const A: usize>(
 }
 
 /// Partitions a large range (always binned on a sample, whose bins neither count nor bound
-/// the sides) from `src` into `dst` on the calling thread, without a counting pass: left references from the start
-/// of `dst` in order, right ones from its end backwards. Chunk by chunk, so that the sides'
-/// bounds are grown in the same grouping as [`parallel_partition`] grows them (with a NaN,
-/// `fmin` is not associative): the same bytes on every thread count.
+/// the sides) from `src` into `dst` on the calling thread, without a counting pass: left
+/// references from the start of `dst` in order, right ones from its end backwards. Chunk by
+/// chunk, so that the sides' bounds are grown in the same grouping as [`parallel_partition`]
+/// grows them (with a NaN, `fmin` is not associative): the same bytes on every thread count.
 fn mirrored_partition<const A: usize>(
     src: &[PrimRef],
     dst: &mut [PrimRef],
@@ -1475,10 +1475,7 @@ mod tests {
                     for k in 0..WIDTH {
                         let c = node.child[k];
                         assert_ne!(c, EMPTY_CHILD, "a node not full");
-                        let b = Aabb {
-                            lo: [node.lo_x[k], node.lo_y[k], node.lo_z[k]],
-                            hi: [node.hi_x[k], node.hi_y[k], node.hi_z[k]],
-                        };
+                        let b = node.bounds(k);
                         let child = if c & LEAF_BIT != 0 {
                             Child::Leaf {
                                 first: c & !LEAF_BIT,
@@ -1607,10 +1604,7 @@ mod tests {
                 } else {
                     exact[c as usize]
                 };
-                let b = Aabb {
-                    lo: [nodes[i].lo_x[k], nodes[i].lo_y[k], nodes[i].lo_z[k]],
-                    hi: [nodes[i].hi_x[k], nodes[i].hi_y[k], nodes[i].hi_z[k]],
-                };
+                let b = nodes[i].bounds(k);
                 assert_eq!((b.lo, b.hi), (held.lo, held.hi), "node {i} child {k}");
                 exact[i] = exact[i].union(&held);
             }

@@ -181,16 +181,16 @@ pub(super) struct BoxRay {
     origin: Vec3,
     pub(super) direction: Vec3,
     inv: Vec3,
-    /// `origin`, `-inv` and `-(inv * ROBUST_FAR)` as eight equal lanes per axis: the node
-    /// test's operands, made once per ray (the far distances' widening folded into the
-    /// inverse: as many roundings as widening the product, so the same bound; three
-    /// multiplications fewer per node. Negated, so that the test computes `(origin - plane) *
-    /// -inv`, the same distance as `(plane - origin) * inv` but with the plane as the
-    /// subtraction's memory operand: six loads fewer per node). Kept whole rather than as scalars broadcast per walk: a walk that
-    /// receives the ray through memory then reads each with a load its store can forward
-    /// (the walk's prologue had loaded a scalar with a load spanning two smaller stores, which
-    /// cannot be forwarded; +4% instructions under callgrind, yet primary rays 1.11 -> 1.19x
-    /// Embree on Sponza and 1.12 -> 1.24x on the conference on the Xeon, every round of six).
+    /// `origin`, `-inv` and `-(inv * ROBUST_FAR)` as eight equal lanes per axis: the node test's
+    /// operands, made once per ray (the far distances' widening folded into the inverse: as many
+    /// roundings as widening the product, so the same bound; three multiplications fewer per node.
+    /// Negated, so that the test computes `(origin - plane) * -inv`, the same distance as `(plane -
+    /// origin) * inv` but with the plane as the subtraction's memory operand: six loads fewer per
+    /// node). Kept whole rather than as scalars broadcast per walk: a walk that receives the ray
+    /// through memory then reads each with a load its store can forward (the walk's prologue had
+    /// loaded a scalar with a load spanning two smaller stores, which cannot be forwarded; +4%
+    /// instructions under callgrind, yet primary rays 1.11 -> 1.19x Embree on Sponza and 1.12 ->
+    /// 1.24x on the conference on the Xeon, every round of six).
     origin8: [f32x8; 3],
     neg_inv8: [f32x8; 3],
     neg_inv_far8: [f32x8; 3],
