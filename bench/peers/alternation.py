@@ -83,7 +83,11 @@ def paired_table(runs, rounds, scenes):
     for (b, n), r in runs.items():
         for (s, lib, key), d in r.items():
             if lib == "paired" and d.get("median") is not None:
-                medians.setdefault((s, d["measure"]), {}).setdefault(b, {})[n] = d["median"]
+                # The robust pairs time the same measure against another Embree variant.
+                measure = d["measure"]
+                if d.get("embree_key", "").endswith("_ROBUST"):
+                    measure += f" vs {d['embree_key']}"
+                medians.setdefault((s, measure), {}).setdefault(b, {})[n] = d["median"]
     if not medians:
         return
     print("\nPaired medians (hostas ÷ Embree) per round, old then new; median over rounds.\n")

@@ -21,10 +21,10 @@ for s in "$@"; do
     full*) ./hostas-peers-new --meshes "$meshes" --threads 16 --scenes sphere,soup,boxes,bunny,sponza,sibenik,conference \
              --json $OUT/r${s#full}.jsonl > $OUT/r${s#full}.md 2> $OUT/r${s#full}.err ;;
     crown*) ./hostas-peers-new --meshes crown --threads 16 --scenes crown \
-             --variants hostas:fast_trace,hostas:fast_build,hostas:default,hostas:refit,embree:LOW,embree:MEDIUM,embree:refit \
+             --variants hostas:fast_trace,hostas:fast_build,hostas:default,hostas:refit,embree:LOW,embree:MEDIUM,embree:MEDIUM_ROBUST,embree:refit \
              --json $OUT/crown${s#crown}.jsonl > $OUT/crown${s#crown}.md 2> $OUT/crown${s#crown}.err ;;
     alt*) r=${s#alt}; mkdir -p /tmp/alt; bash ./alternate.sh ./hostas-peers-old ./hostas-peers-new ${r%-*} ${r#*-} /tmp/alt -- \
-             --scenes bunny,sponza,sibenik,conference --libs hostas,embree --variants hostas:fast_trace,embree:MEDIUM \
+             --scenes bunny,sponza,sibenik,conference --libs hostas,embree --variants hostas:fast_trace,embree:MEDIUM,embree:MEDIUM_ROBUST \
              --threads 1 --reps 3 --no-refit --meshes "$meshes"
           tar -C /tmp -cf $OUT/alt.tar alt ;;
   esac

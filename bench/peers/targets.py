@@ -55,6 +55,13 @@ COLUMNS = [
     ("fast-trace incoherent ÷ MEDIUM", "≥ 1.0",
      ("hostas", "fast_trace", "incoherent_mrays_s_1t", None), ("embree", "MEDIUM", "incoherent_mrays_s_1t", None),
      "fast_trace_incoherent_vs_medium"),
+    # Context, no target: against Embree's robust mode, the nearest to hostas's exact tests.
+    ("fast-trace primary ÷ MEDIUM robust", "",
+     ("hostas", "fast_trace", "primary_mrays_s_1t", None), ("embree", "MEDIUM_ROBUST", "primary_mrays_s_1t", None),
+     "fast_trace_primary_vs_medium_robust"),
+    ("fast-trace incoherent ÷ MEDIUM robust", "",
+     ("hostas", "fast_trace", "incoherent_mrays_s_1t", None), ("embree", "MEDIUM_ROBUST", "incoherent_mrays_s_1t", None),
+     "fast_trace_incoherent_vs_medium_robust"),
 ]
 # Marks a timed-ratio cell where at least one run had no paired median.
 FALLBACK = "†"
@@ -94,7 +101,7 @@ def main(paths):
         for (s, _, _) in r:
             if s not in scenes:
                 scenes.append(s)
-    titles = [f"{c[0]} ({c[1]})" for c in COLUMNS] + [
+    titles = [f"{c[0]} ({c[1]})" if c[1] else c[0] for c in COLUMNS] + [
         f"{a[0]} ({a[1]})" if a[1] else a[0] for a in ABSOLUTE
     ]
     with_pairs = sum(1 for _, p in runs if p)

@@ -53,8 +53,8 @@ struct Args {
         default_value = "hostas,embree,tinybvh,obvhs"
     )]
     libs: Vec<String>,
-    /// Restrict to variants, comma separated `lib` or `lib:key` (keys: embree LOW MEDIUM HIGH
-    /// refit; tinybvh Build BuildAVX BuildHQ refit; obvhs very_fast medium; hostas fast_build
+    /// Restrict to variants, comma separated `lib` or `lib:key` (keys: embree LOW MEDIUM
+    /// MEDIUM_ROBUST HIGH refit; tinybvh Build BuildAVX BuildHQ refit; obvhs very_fast medium; hostas fast_build
     /// default fast_trace low_memory refit).
     #[arg(long, value_delimiter = ',')]
     variants: Option<Vec<String>>,

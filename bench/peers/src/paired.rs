@@ -60,6 +60,21 @@ pub const FAST_TRACE_INCOHERENT: Target = Target {
     hostas: "fast_trace",
     embree: "MEDIUM",
 };
+/// Context, not targets: the same traces against Embree's robust mode, whose node and triangle
+/// tests are the nearest Embree has to the exact, watertight ones hostas must use (MEDIUM's
+/// default kernel is Moller-Trumbore with fast box tests).
+pub const FAST_TRACE_PRIMARY_ROBUST: Target = Target {
+    name: "fast_trace_primary_vs_medium_robust",
+    what: "primary rays 1T",
+    hostas: "fast_trace",
+    embree: "MEDIUM_ROBUST",
+};
+pub const FAST_TRACE_INCOHERENT_ROBUST: Target = Target {
+    name: "fast_trace_incoherent_vs_medium_robust",
+    what: "incoherent rays 1T",
+    hostas: "fast_trace",
+    embree: "MEDIUM_ROBUST",
+};
 
 /// The timed parts of each pair, in ms.
 #[derive(Default)]
@@ -152,8 +167,8 @@ fn builds(cfg: &Cfg, (h, e): &mut Sides, keep: bool) -> Result<Pairs, String> {
     )
 }
 
-/// Trace pairs over the structures the last build pair kept, after one untimed pass each.
-fn traces(cfg: &Cfg, (h, e): &mut Sides, rays: &[Ray]) -> Result<Pairs, String> {
+/// Trace pairs over the structures the sides keep, after one untimed pass each.
+fn traces(cfg: &Cfg, h: &mut dyn Side, e: &mut dyn Side, rays: &[Ray]) -> Result<Pairs, String> {
     let mut hostas_hits = vec![Hit::MISS; rays.len()];
     let mut embree_hits = hostas_hits.clone();
     alternate(
@@ -191,7 +206,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Ratio> {
     .map(|(target, kind)| {
         let pairs = match &mut kept {
             _ if !cfg.trace => Err("--no-trace".to_string()),
-            Ok(s) => traces(cfg, s, rays.get(kind)),
+            Ok((h, e)) => traces(cfg, h.as_mut(), e.as_mut(), rays.get(kind)),
             Err(why) => Err(why.clone()),
         };
         Ratio { target, pairs }
@@ -201,5 +216,26 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Ratio> {
         pairs,
     });
     out.extend(traced);
+    // The same hostas structure against Embree's robust mode (one untimed build kept).
+    let mut robust = match &mut kept {
+        _ if !cfg.trace => Err("--no-trace".to_string()),
+        Err(why) => Err(why.clone()),
+        Ok(_) if !cfg.wants("embree", FAST_TRACE_PRIMARY_ROBUST.embree) => Err(format!(
+            "embree:{} not selected",
+            FAST_TRACE_PRIMARY_ROBUST.embree
+        )),
+        Ok((h, _)) => peers::embree::pair_side(scene, FAST_TRACE_PRIMARY_ROBUST.embree)
+            .and_then(|mut r| r.build(true).map(|_| (h, r))),
+    };
+    for (target, kind) in [
+        (&FAST_TRACE_PRIMARY_ROBUST, Kind::Primary),
+        (&FAST_TRACE_INCOHERENT_ROBUST, Kind::Incoherent),
+    ] {
+        let pairs = match &mut robust {
+            Ok((h, r)) => traces(cfg, h.as_mut(), r.as_mut(), rays.get(kind)),
+            Err(why) => Err(why.clone()),
+        };
+        out.push(Ratio { target, pairs });
+    }
     out
 }

@@ -40,15 +40,19 @@ struct Variant {
     quality: RTCBuildQuality,
     class: Class,
     slow: bool,
+    /// Scene flags: `NONE`, or `ROBUST` for the variant that is traced with Embree's robust
+    /// traversal and triangle test (context for the targets, which compare with the default).
+    flags: RTCSceneFlags,
 }
 
-const VARIANTS: [Variant; 3] = [
+const VARIANTS: [Variant; 4] = [
     Variant {
         key: "LOW",
         desc: "LOW (two-level, Morton; BVH8+Triangle4)",
         quality: RTCBuildQuality::LOW,
         class: Class::FastBuild,
         slow: false,
+        flags: RTCSceneFlags::NONE,
     },
     Variant {
         key: "MEDIUM",
@@ -56,6 +60,15 @@ const VARIANTS: [Variant; 3] = [
         quality: RTCBuildQuality::MEDIUM,
         class: Class::Default,
         slow: false,
+        flags: RTCSceneFlags::NONE,
+    },
+    Variant {
+        key: "MEDIUM_ROBUST",
+        desc: "MEDIUM + RTC_SCENE_FLAG_ROBUST (robust traversal and triangle test)",
+        quality: RTCBuildQuality::MEDIUM,
+        class: Class::Default,
+        slow: false,
+        flags: RTCSceneFlags::ROBUST,
     },
     Variant {
         key: "HIGH",
@@ -63,6 +76,7 @@ const VARIANTS: [Variant; 3] = [
         quality: RTCBuildQuality::HIGH,
         class: Class::FastTrace,
         slow: true,
+        flags: RTCSceneFlags::NONE,
     },
 ];
 
@@ -258,7 +272,7 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
             let mut kept = None;
             let ms = median_ms(warm, reps, || {
                 rep += 1;
-                let (s, g) = new_scene(&d, &verts, idx, v.quality, v.quality, RTCSceneFlags::NONE);
+                let (s, g) = new_scene(&d, &verts, idx, v.quality, v.quality, v.flags);
                 let before = d.allocated();
                 let ((), dt) = time(|| unsafe { rtcCommitScene(s) });
                 if t == 1 && rep == total {
@@ -363,6 +377,11 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Row> {
                 row.sah_note = "proxy skipped for HIGH (--embree-sah-proxy all)".into();
                 continue;
             }
+            if v.flags != RTCSceneFlags::NONE {
+                // The flag changes the leaves and their test, not the builder's splits.
+                row.sah_note = "proxy skipped: the same build quality as MEDIUM".into();
+                continue;
+            }
             let (s, dt) = time(|| sah_proxy(&d, scene, v.quality, &BINARY));
             let (s8, dt8) = time(|| sah_proxy(&d, scene, v.quality, &BVH8_TRIANGLE4));
             row.sah = Some(s);
@@ -388,6 +407,7 @@ struct PairSide<'a> {
     verts: Vec<[f32; 4]>,
     idx: &'a [[u32; 3]],
     quality: RTCBuildQuality,
+    flags: RTCSceneFlags,
     // Last: released after the kept scene.
     d: Device,
 }
@@ -402,6 +422,7 @@ pub fn pair_side<'a>(scene: &'a Scene, key: &str) -> Result<Box<dyn Side + 'a>, 
         verts: verts4(&scene.positions),
         idx: &scene.indices,
         quality: v.quality,
+        flags: v.flags,
         d: Device::new(1),
     }))
 }
@@ -416,7 +437,7 @@ fn release((s, g): (RTCScene, RTCGeometry)) {
 impl Side for PairSide<'_> {
     fn build(&mut self, keep: bool) -> Result<Duration, String> {
         let q = self.quality;
-        let (s, g) = new_scene(&self.d, &self.verts, self.idx, q, q, RTCSceneFlags::NONE);
+        let (s, g) = new_scene(&self.d, &self.verts, self.idx, q, q, self.flags);
         let ((), dt) = time(|| unsafe { rtcCommitScene(s) });
         let err = unsafe { rtcGetDeviceError(self.d.dev) };
         if err != RTCError::NONE {
