@@ -18,7 +18,7 @@ use crate::layout::{
 };
 use crate::math::{Affine, Vec3, fmax, fmax8, fmin, fmin8};
 use ash::vk;
-use wide::f32x8;
+use wide::{f32x4, f32x8};
 
 /// `RayQueryCommittedIntersectionTypeKHR`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -181,19 +181,19 @@ pub(super) struct BoxRay {
     origin: Vec3,
     pub(super) direction: Vec3,
     inv: Vec3,
-    /// `origin`, `-inv` and `-(inv * ROBUST_FAR)` as eight equal lanes per axis: the node test's
+    /// `origin`, `-inv` and `-(inv * ROBUST_FAR)` (x, y, z and a zero lane): the node test's
     /// operands, made once per ray (the far distances' widening folded into the inverse: as many
     /// roundings as widening the product, so the same bound; three multiplications fewer per node.
     /// Negated, so that the test computes `(origin - plane) * -inv`, the same distance as `(plane -
     /// origin) * inv` but with the plane as the subtraction's memory operand: six loads fewer per
-    /// node). Kept whole rather than as scalars broadcast per walk: a walk that receives the ray
-    /// through memory then reads each with a load its store can forward (the walk's prologue had
-    /// loaded a scalar with a load spanning two smaller stores, which cannot be forwarded; +4%
-    /// instructions under callgrind, yet primary rays 1.11 -> 1.19x Embree on Sponza and 1.12 ->
-    /// 1.24x on the conference on the Xeon, every round of six).
-    origin8: [f32x8; 3],
-    neg_inv8: [f32x8; 3],
-    neg_inv_far8: [f32x8; 3],
+    /// node). Each is stored as one 16-byte vector, so that a walk receiving the ray through
+    /// memory broadcasts each lane with a load that its store forwards (scalars stored one by
+    /// one were read by a load spanning two of those stores, which cannot be forwarded; stored as
+    /// nine 8-lane splats, every ray paid nine 32-byte stores: the 16-byte form read primary
+    /// rays 1.1-3.0% higher against Embree on the four meshes on the Xeon, eight rounds each).
+    origin4: f32x4,
+    neg_inv4: f32x4,
+    neg_inv_far4: f32x4,
     /// Per axis, the row of a node (seen as [`Node::rows`]) that holds the children's near
     /// and far planes, chosen once per ray: the `hi_` row when the ray goes towards smaller
     /// values (odd rows are `hi_`).
@@ -220,9 +220,14 @@ impl BoxRay {
             origin,
             direction: dir,
             inv,
-            origin8: origin.map(f32x8::splat),
-            neg_inv8: inv.map(|i| f32x8::splat(-i)),
-            neg_inv_far8: inv.map(|i| f32x8::splat(-(i * ROBUST_FAR))),
+            origin4: f32x4::from([origin[0], origin[1], origin[2], 0.0]),
+            neg_inv4: f32x4::from([-inv[0], -inv[1], -inv[2], 0.0]),
+            neg_inv_far4: f32x4::from([
+                -(inv[0] * ROBUST_FAR),
+                -(inv[1] * ROBUST_FAR),
+                -(inv[2] * ROBUST_FAR),
+                0.0,
+            ]),
             near_row: rows.map(|(near, _)| near),
             far_row: rows.map(|(_, far)| far),
         }
@@ -264,9 +269,10 @@ impl BoxRay {
         let [nx, ny, nz] = near_row.map(row);
         let [fx, fy, fz] = far_row.map(row);
         let s = f32x8::splat;
-        let [ox, oy, oz] = self.origin8;
-        let [ix, iy, iz] = self.neg_inv8;
-        let [jx, jy, jz] = self.neg_inv_far8;
+        let sp = |v: &f32x4, k: usize| f32x8::splat(v.as_array()[k]);
+        let [ox, oy, oz] = [0, 1, 2].map(|k| sp(&self.origin4, k));
+        let [ix, iy, iz] = [0, 1, 2].map(|k| sp(&self.neg_inv4, k));
+        let [jx, jy, jz] = [0, 1, 2].map(|k| sp(&self.neg_inv_far4, k));
         // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval
         // unbounded on that axis (`fmax8(term, acc)` is `acc` when `term` is NaN). Capping
         // the far end at f32::MAX also rejects a ray parallel to a slab it is outside of,
