@@ -178,9 +178,8 @@ pub(super) fn prune_limit(t_max: f32) -> f32 {
 
 #[derive(Clone, Copy)]
 pub(super) struct BoxRay {
-    origin: Vec3,
-    pub(super) direction: Vec3,
-    inv: Vec3,
+    /// The direction (x, y, z and a zero lane).
+    dir4: f32x4,
     /// `origin`, `-inv` and `-(inv * ROBUST_FAR)` (x, y, z and a zero lane): the node test's
     /// operands, made once per ray (the far distances' widening folded into the inverse: as many
     /// roundings as widening the product, so the same bound; three multiplications fewer per node.
@@ -217,9 +216,7 @@ impl BoxRay {
         let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
         let rows = [0, 1, 2].map(|k| slab_rows(k, u32::from(inv[k].is_sign_negative())));
         BoxRay {
-            origin,
-            direction: dir,
-            inv,
+            dir4: f32x4::from([dir[0], dir[1], dir[2], 0.0]),
             origin4: f32x4::from([origin[0], origin[1], origin[2], 0.0]),
             neg_inv4: f32x4::from([-inv[0], -inv[1], -inv[2], 0.0]),
             neg_inv_far4: f32x4::from([
@@ -233,15 +230,38 @@ impl BoxRay {
         }
     }
 
+    /// The first three lanes of `v`.
+    #[inline(always)]
+    fn xyz(v: f32x4) -> Vec3 {
+        let [x, y, z, _] = v.to_array();
+        [x, y, z]
+    }
+
+    #[inline(always)]
+    fn origin(&self) -> Vec3 {
+        Self::xyz(self.origin4)
+    }
+
+    #[inline(always)]
+    pub(super) fn direction(&self) -> Vec3 {
+        Self::xyz(self.dir4)
+    }
+
+    /// `1 / direction` (negating the stored `-inv` is exact).
+    #[inline(always)]
+    fn inv(&self) -> Vec3 {
+        Self::xyz(-self.neg_inv4)
+    }
+
     /// The same ray prepared for the watertight triangle test, for a ray whose
     /// [`permutation`](super::triangle::permutation) is `P` (reusing the inverse), or any
     /// ray for [`ANY_AXES`].
     #[inline(always)]
     pub(super) fn sheared<const P: usize>(&self) -> ShearedRay {
         if P < ANY_AXES {
-            ShearedRay::for_axes::<P>(self.origin, self.direction, self.inv)
+            ShearedRay::for_axes::<P>(self.origin(), self.direction(), self.inv())
         } else {
-            ShearedRay::new(self.origin, self.direction)
+            ShearedRay::new(self.origin(), self.direction())
         }
     }
 
@@ -294,6 +314,7 @@ impl BoxRay {
     #[inline(always)]
     pub(super) fn aabb(&self, b: &[f32; 6], t_min: f32, t_max: f32) -> Option<f32> {
         // As in `node`: axis terms first, so NaN (ray in a slab plane) means "inside".
+        let (origin, inv) = (self.origin(), self.inv());
         let mut near = t_min;
         let mut far = t_max;
         for k in 0..3 {
@@ -302,8 +323,8 @@ impl BoxRay {
             } else {
                 (b[k], b[k + 3])
             };
-            near = fmax((lo - self.origin[k]) * self.inv[k], near);
-            far = fmin((hi - self.origin[k]) * self.inv[k] * ROBUST_FAR, far);
+            near = fmax((lo - origin[k]) * inv[k], near);
+            far = fmin((hi - origin[k]) * inv[k] * ROBUST_FAR, far);
         }
         // A ray parallel to a slab it is outside of has near = +inf: no candidate at infinity.
         (near <= far && near < f32::INFINITY).then_some(near)
@@ -921,7 +942,7 @@ mod tests {
             (mask, near.map(f32::to_bits))
         }
         fn node_by_permutation(r: &BoxRay, n: &Node, t: f32) -> (u32, [u32; WIDTH]) {
-            match permutation(r.direction) {
+            match permutation(r.direction()) {
                 0 => node_for::<0>(r, n, t),
                 1 => node_for::<1>(r, n, t),
                 2 => node_for::<2>(r, n, t),

@@ -406,7 +406,7 @@ fn walk_permuted<T: LeafTriangles, const FIRST: bool>(
     ray: &Ray,
     best: &mut Best,
 ) -> bool {
-    match permutation(local.direction) {
+    match permutation(local.direction()) {
         0 => trace_blas::<0, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
         1 => trace_blas::<1, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
         2 => trace_blas::<2, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
@@ -665,7 +665,7 @@ struct BlasAt<'a, 's> {
 
 /// Continues the walk of one instance's bottom-level structure (its entries on `stack` below
 /// `walk.sp`), updating `best`. Returns whether it accepted a hit. Instantiated per axis
-/// permutation `P` of the ray (`permutation(boxes.direction) == P`), so that preparing the ray
+/// permutation `P` of the ray (`permutation(boxes.direction()) == P`), so that preparing the ray
 /// for the triangle test and the test itself index nothing at run time, and the node test
 /// reads the dominant axis's planes at constant offsets; and apart for a structure of AABBs
 /// (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop holds what only
