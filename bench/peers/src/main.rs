@@ -54,8 +54,8 @@ struct Args {
     )]
     libs: Vec<String>,
     /// Restrict to variants, comma separated `lib` or `lib:key` (keys: embree LOW MEDIUM
-    /// MEDIUM_ROBUST HIGH refit; tinybvh Build BuildAVX BuildHQ refit; obvhs very_fast medium; hostas fast_build
-    /// default fast_trace low_memory refit).
+    /// MEDIUM_ROBUST HIGH refit; tinybvh Build BuildAVX BuildHQ refit; obvhs very_fast medium;
+    /// hostas fast_build default fast_trace low_memory refit).
     #[arg(long, value_delimiter = ',')]
     variants: Option<Vec<String>>,
     /// Timed build repetitions (median), after --warmup untimed ones.

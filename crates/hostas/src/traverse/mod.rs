@@ -17,6 +17,7 @@ pub use tracer::Tracer;
 use crate::error::{Error, Location, Result};
 use crate::layout::PrimKind;
 use crate::math::Vec3;
+use wide::f32x4;
 
 /// SPIR-V `RayFlags` (`gl_RayFlags*EXT`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -113,8 +114,11 @@ impl Ray {
         // Field by field: a caller has usually just stored the ray, field by field, and a
         // load spanning several of those stores cannot be forwarded from them (one 32-byte
         // load of origin to tMax made primary rays 7-17% slower on the Xeon).
-        let finite =
-            (o[0] * 0.0 + o[1] * 0.0 + o[2] * 0.0) + (d[0] * 0.0 + d[1] * 0.0 + d[2] * 0.0) == 0.0;
+        // Lane by lane, as the tracer's `BoxRay` holds the ray (the same vectors, made once):
+        // a lane is zero unless its origin or direction component is infinite or NaN.
+        let v = |p: Vec3| f32x4::from([p[0], p[1], p[2], 0.0]);
+        let zero = f32x4::ZERO;
+        let finite = (v(o) * zero + v(d) * zero).simd_eq(zero).to_bitmask() == 0b1111;
         // False when either is NaN.
         let range = (0.0 <= self.t_min) & (self.t_min <= self.t_max);
         // Each flag rule forbids a pair of the flags it names: a ray that sets at most one of
