@@ -1410,6 +1410,9 @@ rules! {
             ray_invalid(Ray::new([0.0, 0.0, 0.0], [0.0, 0.0, f32::INFINITY])),
             ray_invalid(Ray::new([0.0, 0.0, f32::NAN], [0.0, 0.0, -1.0])),
             ray_invalid(Ray::new([0.0, 0.0, 0.0], [f32::NAN, 0.0, -1.0])),
+            // Every lane of the vector check: the direction's y too (huge finite values stay
+            // valid: `huge_finite_rays_are_valid`).
+            ray_invalid(Ray::new([0.0, 0.0, 0.0], [0.0, f32::NEG_INFINITY, -1.0])),
         ])
     }
 
@@ -1562,6 +1565,23 @@ fn overlapping_update() -> Result<(), Error> {
 // ---------------------------------------------------------------------------------------------
 // Sweeps.
 // ---------------------------------------------------------------------------------------------
+
+/// The finiteness rule rejects only infinities and NaNs: the largest and smallest finite
+/// components (whose products with zero, which the check sums, stay zero) are valid, through
+/// every entry point.
+#[test]
+fn huge_finite_rays_are_valid() {
+    let device = Device::new();
+    let scene = triangle_scene(&device, fast());
+    for ray in [
+        Ray::new([f32::MAX, -f32::MAX, 1e-45], [0.0, 0.0, -1.0]),
+        Ray::new([0.0, 0.0, 1.0], [-f32::MAX, f32::MIN_POSITIVE, -f32::MAX]),
+    ] {
+        assert!(ray.validate().is_ok(), "{ray:?}");
+        assert!(scene.ray_query(&ray).is_ok(), "{ray:?}");
+        assert!(scene.trace_closest(&ray).is_ok(), "{ray:?}");
+    }
+}
 
 #[test]
 fn no_invalid_input_panics() {
