@@ -101,6 +101,12 @@ impl Box4 {
     }
 }
 
+/// `v` in lanes 0..3 of a vector (lane 3 zero).
+#[inline(always)]
+pub fn lanes(v: Vec3) -> wide::f32x4 {
+    wide::f32x4::from([v[0], v[1], v[2], 0.0])
+}
+
 #[inline(always)]
 pub fn sub(a: Vec3, b: Vec3) -> Vec3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]

@@ -16,7 +16,7 @@ use crate::layout::view::{self, View};
 use crate::layout::{
     GeometryRecord, HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, Header, InstanceRecord, Kind, PrimKind,
 };
-use crate::math::{Aabb, Affine, Box4};
+use crate::math::{Aabb, Affine, Box4, lanes};
 use ash::vk;
 use rayon::prelude::*;
 use wide::{f32x4, i32x4};
@@ -920,12 +920,6 @@ fn decode_chunk<const REFS: bool>(
             decode_tris::<REFS>(tris, t, base, first, outs, refs)
         }
     }
-}
-
-/// A vertex in lanes 0..3 (lane 3 zero).
-#[inline(always)]
-fn lanes(v: [f32; 3]) -> f32x4 {
-    f32x4::from([v[0], v[1], v[2], 0.0])
 }
 
 /// Triangle `p` of `t` as three vertices, for the common layouts: `None` where the reader

@@ -16,7 +16,7 @@ pub use tracer::Tracer;
 
 use crate::error::{Error, Location, Result};
 use crate::layout::PrimKind;
-use crate::math::Vec3;
+use crate::math::{Vec3, lanes};
 use wide::f32x4;
 
 /// SPIR-V `RayFlags` (`gl_RayFlags*EXT`).
@@ -116,9 +116,11 @@ impl Ray {
         // load of origin to tMax made primary rays 7-17% slower on the Xeon).
         // Lane by lane, as the tracer's `BoxRay` holds the ray (the same vectors, made once):
         // a lane is zero unless its origin or direction component is infinite or NaN.
-        let v = |p: Vec3| f32x4::from([p[0], p[1], p[2], 0.0]);
         let zero = f32x4::ZERO;
-        let finite = (v(o) * zero + v(d) * zero).simd_eq(zero).to_bitmask() == 0b1111;
+        let finite = (lanes(o) * zero + lanes(d) * zero)
+            .simd_eq(zero)
+            .to_bitmask()
+            == 0b1111;
         // False when either is NaN.
         let range = (0.0 <= self.t_min) & (self.t_min <= self.t_max);
         // Each flag rule forbids a pair of the flags it names: a ray that sets at most one of

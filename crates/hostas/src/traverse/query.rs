@@ -16,7 +16,7 @@ use crate::layout::{
     HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind,
     WIDTH,
 };
-use crate::math::{Affine, Vec3, fmax, fmax8, fmin, fmin8};
+use crate::math::{Affine, Vec3, fmax, fmax8, fmin, fmin8, lanes};
 use ash::vk;
 use wide::{f32x4, f32x8};
 
@@ -216,8 +216,8 @@ impl BoxRay {
         let inv = [1.0 / dir[0], 1.0 / dir[1], 1.0 / dir[2]];
         let rows = [0, 1, 2].map(|k| slab_rows(k, u32::from(inv[k].is_sign_negative())));
         BoxRay {
-            dir4: f32x4::from([dir[0], dir[1], dir[2], 0.0]),
-            origin4: f32x4::from([origin[0], origin[1], origin[2], 0.0]),
+            dir4: lanes(dir),
+            origin4: lanes(origin),
             neg_inv4: f32x4::from([-inv[0], -inv[1], -inv[2], 0.0]),
             neg_inv_far4: f32x4::from([
                 -(inv[0] * ROBUST_FAR),

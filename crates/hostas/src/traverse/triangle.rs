@@ -9,7 +9,7 @@
 //! points "up" (or exactly "right"), a top-left rule. Of two triangles that share the edge
 //! with the same winding, exactly one owns it, and of a closed fan exactly one owns the vertex.
 
-use crate::math::Vec3;
+use crate::math::{Vec3, lanes};
 use wide::{f32x4, f32x8};
 
 /// A ray prepared for the watertight test.
@@ -66,7 +66,7 @@ pub fn permutation(dir: Vec3) -> usize {
     let ge = f32x4::from([a[0], a[0], a[1], 0.0]).simd_ge(f32x4::from([a[1], a[2], a[2], 0.0]));
     // Signs as the box test sees them (the sign of `1 / d`, so -0 points down): a walk
     // instantiated for `P` reads the dominant axis's planes by it.
-    let down = f32x4::from([dir[0], dir[1], dir[2], 0.0]).to_bitmask();
+    let down = lanes(dir).to_bitmask();
     let index = (ge.to_bitmask() & 7) | (down & 7) << 3;
     PERMUTATION_OF[index as usize & 63] as usize
 }
