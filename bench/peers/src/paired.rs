@@ -179,6 +179,23 @@ fn traces(cfg: &Cfg, h: &mut dyn Side, e: &mut dyn Side, rays: &[Ray]) -> Result
     )
 }
 
+/// The primary-ray and incoherent-ray pairs of `targets` between `sides` (hostas, Embree), or
+/// the reason there are none.
+fn trace_targets<'a>(
+    cfg: &Cfg,
+    rays: &RaySet,
+    mut sides: Result<(&mut (dyn Side + 'a), &mut (dyn Side + 'a)), String>,
+    [primary, incoherent]: [&'static Target; 2],
+) -> [Ratio; 2] {
+    [(primary, Kind::Primary), (incoherent, Kind::Incoherent)].map(|(target, kind)| {
+        let pairs = match &mut sides {
+            Ok((h, e)) => traces(cfg, &mut **h, &mut **e, rays.get(kind)),
+            Err(why) => Err(why.clone()),
+        };
+        Ratio { target, pairs }
+    })
+}
+
 /// The paired phase of one scene (see the module comment). Empty when it is off (`--pairs 0`).
 pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Ratio> {
     if cfg.pairs == 0 {
@@ -199,43 +216,41 @@ pub fn run(scene: &Scene, rays: &RaySet, cfg: &Cfg) -> Vec<Ratio> {
         },
         Err(why) => (Err(why.clone()), Err(why)),
     };
-    let traced = [
-        (&FAST_TRACE_PRIMARY, Kind::Primary),
-        (&FAST_TRACE_INCOHERENT, Kind::Incoherent),
-    ]
-    .map(|(target, kind)| {
-        let pairs = match &mut kept {
-            _ if !cfg.trace => Err("--no-trace".to_string()),
-            Ok((h, e)) => traces(cfg, h.as_mut(), e.as_mut(), rays.get(kind)),
-            Err(why) => Err(why.clone()),
-        };
-        Ratio { target, pairs }
-    });
+    const NO_TRACE: &str = "--no-trace";
+    let medium = match &mut kept {
+        _ if !cfg.trace => Err(NO_TRACE.to_string()),
+        Ok((h, e)) => Ok((h.as_mut(), e.as_mut())),
+        Err(why) => Err(why.clone()),
+    };
+    let traced = trace_targets(
+        cfg,
+        rays,
+        medium,
+        [&FAST_TRACE_PRIMARY, &FAST_TRACE_INCOHERENT],
+    );
     out.push(Ratio {
         target: &FAST_TRACE_BUILD,
         pairs,
     });
     out.extend(traced);
     // The same hostas structure against Embree's robust mode (one untimed build kept).
-    let mut robust = match &mut kept {
-        _ if !cfg.trace => Err("--no-trace".to_string()),
+    let robust = FAST_TRACE_PRIMARY_ROBUST.embree;
+    let mut robust_side = match &kept {
+        _ if !cfg.trace => Err(NO_TRACE.to_string()),
         Err(why) => Err(why.clone()),
-        Ok(_) if !cfg.wants("embree", FAST_TRACE_PRIMARY_ROBUST.embree) => Err(format!(
-            "embree:{} not selected",
-            FAST_TRACE_PRIMARY_ROBUST.embree
-        )),
-        Ok((h, _)) => peers::embree::pair_side(scene, FAST_TRACE_PRIMARY_ROBUST.embree)
-            .and_then(|mut r| r.build(true).map(|_| (h, r))),
+        Ok(_) if !cfg.wants("embree", robust) => Err(format!("embree:{robust} not selected")),
+        Ok(_) => peers::embree::pair_side(scene, robust).and_then(|mut r| r.build(true).map(|_| r)),
     };
-    for (target, kind) in [
-        (&FAST_TRACE_PRIMARY_ROBUST, Kind::Primary),
-        (&FAST_TRACE_INCOHERENT_ROBUST, Kind::Incoherent),
-    ] {
-        let pairs = match &mut robust {
-            Ok((h, r)) => traces(cfg, h.as_mut(), r.as_mut(), rays.get(kind)),
-            Err(why) => Err(why.clone()),
-        };
-        out.push(Ratio { target, pairs });
-    }
+    let sides = match (&mut kept, &mut robust_side) {
+        (Ok((h, _)), Ok(r)) => Ok((h.as_mut(), r.as_mut())),
+        (_, Err(why)) => Err(why.clone()),
+        (Err(why), _) => Err(why.clone()),
+    };
+    out.extend(trace_targets(
+        cfg,
+        rays,
+        sides,
+        [&FAST_TRACE_PRIMARY_ROBUST, &FAST_TRACE_INCOHERENT_ROBUST],
+    ));
     out
 }
