@@ -334,6 +334,15 @@ pub fn random_ray(r: &mut Rand, scene: &SceneDesc) -> Ray {
         target[1] - origin[1],
         target[2] - origin[2],
     ];
+    if r.gen_bool(0.1) {
+        // In the planes of the boxes' slabs (a zero component, of either sign): the
+        // traversal's general node test, where a slab distance is 0 x inf.
+        let k = r.gen_range(0..3);
+        dir[k] = if r.gen_bool(0.5) { 0.0 } else { -0.0 };
+        if r.gen_bool(0.3) {
+            dir[(k + 1) % 3] = 0.0;
+        }
+    }
     if dir == [0.0; 3] || dir.iter().any(|v| !v.is_finite()) {
         dir = [0.0, 0.0, 1.0];
     }

@@ -16,7 +16,7 @@ use crate::layout::{
     HEADER_ALL_OPAQUE, HEADER_NONE_OPAQUE, InstanceRecord, LEAF_BIT, MAX_DEPTH, Node, PrimKind,
     WIDTH,
 };
-use crate::math::{Affine, Vec3, fmax, fmax8, fmin, fmin8, lanes};
+use crate::math::{Affine, INTEGER_MIN_MAX, Vec3, fmax, fmax8, fmin, fmin8, imax8, imin8, lanes};
 use ash::vk;
 use wide::{f32x4, f32x8};
 
@@ -267,9 +267,26 @@ impl BoxRay {
 
     /// Entry distances of the children of `node` and the mask of those the segment
     /// `[t_min, t_max]` reaches (inclusive at both ends). Empty slots have inverted boxes and
-    /// never hit. All eight slabs at once (`wide`: AVX, or two SSE halves).
+    /// never hit. All eight slabs at once (`wide`: AVX, or two SSE halves). `P` below
+    /// [`ANY_AXES`] only for a ray with a [`finite_inverse`](Self::finite_inverse).
     #[inline(always)]
     pub(super) fn node<const P: usize>(
+        &self,
+        n: &Node,
+        t_min: f32,
+        t_max: f32,
+    ) -> (u32, [f32; WIDTH]) {
+        if P < ANY_AXES && INTEGER_MIN_MAX {
+            self.slabs::<P, true>(n, t_min, t_max)
+        } else {
+            self.slabs::<P, false>(n, t_min, t_max)
+        }
+    }
+
+    /// [`BoxRay::node`], reducing the slabs' distances with integer minima and maxima
+    /// (`INTEGER`, for a ray with a finite inverse) or with float ones (any ray).
+    #[inline(always)]
+    fn slabs<const P: usize, const INTEGER: bool>(
         &self,
         n: &Node,
         t_min: f32,
@@ -293,22 +310,54 @@ impl BoxRay {
         let [ox, oy, oz] = [0, 1, 2].map(|k| sp(&self.origin4, k));
         let [ix, iy, iz] = [0, 1, 2].map(|k| sp(&self.neg_inv4, k));
         let [jx, jy, jz] = [0, 1, 2].map(|k| sp(&self.neg_inv_far4, k));
-        // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval
-        // unbounded on that axis (`fmax8(term, acc)` is `acc` when `term` is NaN). Capping
-        // the far end at f32::MAX also rejects a ray parallel to a slab it is outside of,
-        // which enters at +inf.
-        let near = fmax8(
-            (ox - nx) * ix,
-            fmax8((oy - ny) * iy, fmax8((oz - nz) * iz, s(t_min))),
-        );
-        let far = fmin8(
-            (ox - fx) * jx,
-            fmin8(
-                (oy - fy) * jy,
-                fmin8((oz - fz) * jz, s(fmin(prune_limit(t_max), f32::MAX))),
-            ),
-        );
+        // Capping the far end at f32::MAX also rejects a ray parallel to a slab it is outside
+        // of, which enters at +inf.
+        let hi = s(fmin(prune_limit(t_max), f32::MAX));
+        let (near, far) = if INTEGER {
+            // `+ 0.0` makes a `t_min` of -0.0 +0.0 (the same bound), so that the near distance
+            // is never below +0.0. A ray with a finite inverse has no NaN distance, so the near
+            // distance, a maximum with `lo`, is the float one (+0.0 where that is -0.0). The far
+            // one is the float one unless a slab's is negative (or -0.0); then both have the
+            // sign bit, and the box is missed unless `near` is +0.0 and the integer minimum
+            // is -0.0 while the float one is below it: a ray whose origin lies on a far plane
+            // then enters a box it leaves at t = 0 on another axis (harmless: a visit more).
+            // The integer forms take one cycle each on this chain, the float ones four on
+            // recent Intel cores: primary rays 6-10% faster on the Xeon.
+            let lo = s(t_min + 0.0);
+            (
+                imax8(
+                    (ox - nx) * ix,
+                    imax8((oy - ny) * iy, imax8((oz - nz) * iz, lo)),
+                ),
+                imin8(
+                    (ox - fx) * jx,
+                    imin8((oy - fy) * jy, imin8((oz - fz) * jz, hi)),
+                ),
+            )
+        } else {
+            // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval
+            // unbounded on that axis (`fmax8(term, acc)` is `acc` when `term` is NaN).
+            let lo = s(t_min);
+            (
+                fmax8(
+                    (ox - nx) * ix,
+                    fmax8((oy - ny) * iy, fmax8((oz - nz) * iz, lo)),
+                ),
+                fmin8(
+                    (ox - fx) * jx,
+                    fmin8((oy - fy) * jy, fmin8((oz - fz) * jz, hi)),
+                ),
+            )
+        };
         (near.simd_le(far).to_bitmask(), near.to_array())
+    }
+
+    /// Whether `1 / direction` is finite on every axis: a walk instantiated for the ray's
+    /// permutation tests its nodes with integer minima and maxima, which a NaN distance (0 x
+    /// inf, a ray in a slab's plane) would break.
+    #[inline(always)]
+    pub(super) fn finite_inverse(&self) -> bool {
+        self.neg_inv4.is_finite().to_bitmask() == 0b1111
     }
 
     #[inline(always)]
@@ -934,21 +983,24 @@ mod tests {
     /// The node test of a walk instantiated for the ray's permutation reads the dominant
     /// axis's planes at constant rows; it must give the bits of the test that reads every row
     /// from the ray, for every direction: signed zeros (a zero direction included), ties
-    /// between magnitudes, rays in a slab's plane.
+    /// between magnitudes, rays in a slab's plane. And for a ray with a finite inverse, the
+    /// integer reduction must give the float one's distances and children, but for the one
+    /// case its comment names (a child whose far plane the origin lies on: one visit more).
     #[test]
     fn node_test_for_the_permutation_matches_the_general_one() {
-        fn node_for<const P: usize>(r: &BoxRay, n: &Node, t: f32) -> (u32, [u32; WIDTH]) {
-            let (mask, near) = r.node::<P>(n, 0.0, t);
+        type Test = (u32, [u32; WIDTH]);
+        fn node_for<const P: usize, const I: bool>(r: &BoxRay, n: &Node, t: [f32; 2]) -> Test {
+            let (mask, near) = r.slabs::<P, I>(n, t[0], t[1]);
             (mask, near.map(f32::to_bits))
         }
-        fn node_by_permutation(r: &BoxRay, n: &Node, t: f32) -> (u32, [u32; WIDTH]) {
+        fn node_by_permutation<const I: bool>(r: &BoxRay, n: &Node, t: [f32; 2]) -> Test {
             match permutation(r.direction()) {
-                0 => node_for::<0>(r, n, t),
-                1 => node_for::<1>(r, n, t),
-                2 => node_for::<2>(r, n, t),
-                3 => node_for::<3>(r, n, t),
-                4 => node_for::<4>(r, n, t),
-                _ => node_for::<5>(r, n, t),
+                0 => node_for::<0, I>(r, n, t),
+                1 => node_for::<1, I>(r, n, t),
+                2 => node_for::<2, I>(r, n, t),
+                3 => node_for::<3, I>(r, n, t),
+                4 => node_for::<4, I>(r, n, t),
+                _ => node_for::<5, I>(r, n, t),
             }
         }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(0x5eed_a5e5);
@@ -968,7 +1020,11 @@ mod tests {
             }
         }
         dirs.extend((0..2000).map(|_| [0; 3].map(|_| rng.gen_range(-1.0f32..1.0))));
-        let mut hits = 0;
+        let (mut hits, mut finite, mut extra) = (0, 0, 0);
+        // On child 2's far plane in x for a ray going up x, past its far plane in y for a ray
+        // going up y, inside it in z: the integer test's extra visit.
+        let b2 = node.bounds(2);
+        let past = [b2.hi[0], b2.hi[1] + 0.5, 0.5 * (b2.lo[2] + b2.hi[2])];
         for d in dirs {
             // Origins inside, outside and on the children's planes.
             for o in [
@@ -976,16 +1032,40 @@ mod tests {
                 [-2.0, 0.5, 3.0],
                 node.bounds(0).lo,
                 node.bounds(1).hi,
+                past,
             ] {
                 let r = BoxRay::new(o, d);
-                for t in [f32::INFINITY, 1.0] {
-                    let general = node_for::<ANY_AXES>(&r, &node, t);
-                    assert_eq!(
-                        node_by_permutation(&r, &node, t),
-                        general,
-                        "o {o:?} d {d:?}"
-                    );
+                let ts = [0.0, -0.0, 0.25].map(|t_min| [[t_min, f32::INFINITY], [t_min, 1.0]]);
+                for t in ts.into_iter().flatten() {
+                    let general = node_for::<ANY_AXES, false>(&r, &node, t);
+                    let by_permutation = node_by_permutation::<false>(&r, &node, t);
+                    assert_eq!(by_permutation, general, "o {o:?} d {d:?} t {t:?}");
                     hits += general.0.count_ones();
+                    if !r.finite_inverse() {
+                        continue;
+                    }
+                    finite += 1;
+                    for (mask, near) in [
+                        node_by_permutation::<true>(&r, &node, t),
+                        node_for::<ANY_AXES, true>(&r, &node, t),
+                    ] {
+                        // The same distances (+0.0 for -0.0 where `t_min` is -0.0).
+                        let same = (0..WIDTH).all(|k| {
+                            f32::from_bits(near[k]) == f32::from_bits(general.1[k])
+                                && (near[k] == general.1[k]
+                                    || t[0].to_bits() == (-0.0f32).to_bits())
+                        });
+                        assert!(same, "o {o:?} d {d:?} t {t:?}: {near:?} {:?}", general.1);
+                        assert_eq!(mask & general.0, general.0, "o {o:?} d {d:?} t {t:?}");
+                        for k in (0..WIDTH).filter(|k| (mask & !general.0) >> k & 1 != 0) {
+                            // The far plane of axis `a` is `hi` for a ray going up it.
+                            let b = node.bounds(k);
+                            let far = |a: usize| if d[a] > 0.0 { b.hi[a] } else { b.lo[a] };
+                            let on_far = (0..3).any(|a| o[a] == far(a));
+                            assert!(on_far, "child {k}: o {o:?} d {d:?} t {t:?}");
+                            extra += 1;
+                        }
+                    }
                 }
             }
         }
@@ -993,5 +1073,7 @@ mod tests {
             hits > 1000,
             "the rays hit {hits} children: too few to compare"
         );
+        assert!(finite > 10_000, "{finite} rays with a finite inverse");
+        assert!(extra > 0, "the integer test's extra visit was never met");
     }
 }

@@ -406,6 +406,11 @@ fn walk_permuted<T: LeafTriangles, const FIRST: bool>(
     ray: &Ray,
     best: &mut Best,
 ) -> bool {
+    if !local.finite_inverse() {
+        // A direction with a zero component (or one so small that its inverse overflows):
+        // the general node test, and the permutation read at run time (rare rays).
+        return trace_blas::<ANY_AXES, T, true, FIRST>(stack, walk, at, tris, local, ray, best);
+    }
     match permutation(local.direction()) {
         0 => trace_blas::<0, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
         1 => trace_blas::<1, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
@@ -424,7 +429,8 @@ trait LeafTriangles: TriangleSource {
     type Tri;
     /// The `count` triangles from `first` (none when out of range).
     fn leaf(&self, first: usize, count: usize) -> impl Iterator<Item = impl Borrow<Self::Tri>>;
-    /// [`ShearedRay::intersect_axes`] for a triangle of this layout.
+    /// [`ShearedRay::intersect_axes`] for a triangle of this layout (the ray's permutation
+    /// read at run time for [`ANY_AXES`]).
     fn intersect<const P: usize>(ray: &ShearedRay, tri: &Self::Tri) -> Option<TriangleHit>;
     /// Leaves of at least this many triangles go to [`LeafTriangles::nearest`] (`u32::MAX`:
     /// none, and the bottom-level loop keeps no code for it).
@@ -475,7 +481,11 @@ impl LeafTriangles for &[[f32; 9]] {
     }
     #[inline(always)]
     fn intersect<const P: usize>(ray: &ShearedRay, tri: &[f32; 9]) -> Option<TriangleHit> {
-        ray.intersect_axes::<P>(tri)
+        if P < ANY_AXES {
+            ray.intersect_axes::<P>(tri)
+        } else {
+            ray.intersect(tri)
+        }
     }
 
     /// From three triangles, where the eight-lane test has AVX (measured under callgrind on
@@ -590,7 +600,11 @@ impl LeafTriangles for Indexed<'_> {
     }
     #[inline(always)]
     fn intersect<const P: usize>(ray: &ShearedRay, tri: &[f32; 12]) -> Option<TriangleHit> {
-        ray.intersect_rows::<P>(tri)
+        if P < ANY_AXES {
+            ray.intersect_rows::<P>(tri)
+        } else {
+            ray.intersect_rows_any(tri)
+        }
     }
 }
 
@@ -665,12 +679,14 @@ struct BlasAt<'a, 's> {
 
 /// Continues the walk of one instance's bottom-level structure (its entries on `stack` below
 /// `walk.sp`), updating `best`. Returns whether it accepted a hit. Instantiated per axis
-/// permutation `P` of the ray (`permutation(boxes.direction()) == P`), so that preparing the ray
-/// for the triangle test and the test itself index nothing at run time, and the node test
-/// reads the dominant axis's planes at constant offsets; and apart for a structure of AABBs
-/// (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop holds what only
-/// the other needs. Not inlined: the bottom-level loop is the hot one and gets the registers
-/// to itself.
+/// permutation `P` of the ray (`permutation(boxes.direction()) == P`, for a ray with a finite
+/// inverse), so that preparing the ray for the triangle test and the test itself index
+/// nothing at run time, and the node test reads the dominant axis's planes at constant
+/// offsets and reduces with integer minima and maxima; for other rays with `P` [`ANY_AXES`]
+/// (the general node test, the permutation read at run time); and apart for a structure of
+/// AABBs (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop holds what
+/// only the other needs. Not inlined: the bottom-level loop is the hot one and gets the
+/// registers to itself.
 #[inline(never)]
 fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIRST: bool>(
     stack: &mut BlasStack,
@@ -708,8 +724,13 @@ fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIR
         }
         let first = cur.child & !LEAF_BIT;
         let range = first as usize..first as usize + cur.count as usize;
-        // (The first two terms are constants: a layout without a wide test keeps no code for it.)
-        if TRIANGLES && T::NEAREST_FROM != u32::MAX && !culls && cur.count >= T::NEAREST_FROM {
+        // (The first three terms are constants: a walk without a wide test keeps no code for it.)
+        if TRIANGLES
+            && P < ANY_AXES
+            && T::NEAREST_FROM != u32::MAX
+            && !culls
+            && cur.count >= T::NEAREST_FROM
+        {
             if let Some((k, h)) = tris.nearest::<P, FIRST>(
                 &sheared,
                 first as usize,

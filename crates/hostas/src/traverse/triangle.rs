@@ -174,6 +174,19 @@ impl ShearedRay {
         hit(self.sz, &s.z, u, v, w)
     }
 
+    /// [`ShearedRay::intersect_rows`] for the ray's `perm`, known at run time.
+    #[inline(always)]
+    pub fn intersect_rows_any(&self, rows: &[f32; 12]) -> Option<TriangleHit> {
+        match self.perm {
+            0 => self.intersect_rows::<0>(rows),
+            1 => self.intersect_rows::<1>(rows),
+            2 => self.intersect_rows::<2>(rows),
+            3 => self.intersect_rows::<3>(rows),
+            4 => self.intersect_rows::<4>(rows),
+            _ => self.intersect_rows::<5>(rows),
+        }
+    }
+
     /// [`ShearedRay::intersect_axes`] for a triangle given as rows (the x coordinates of its
     /// vertices in index order, then their y, then their z, each row padded to four floats):
     /// the same operations on the same values, a row at a time.
