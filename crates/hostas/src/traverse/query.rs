@@ -283,8 +283,9 @@ impl BoxRay {
         }
     }
 
-    /// [`BoxRay::node`], reducing the slabs' distances with integer minima and maxima
-    /// (`INTEGER`, for a ray with a finite inverse) or with float ones (any ray).
+    /// [`BoxRay::node`], reducing and comparing the slabs' distances with integer minima,
+    /// maxima and compare (`INTEGER`, for a ray with a finite inverse) or with float ones (any
+    /// ray).
     #[inline(always)]
     fn slabs<const P: usize, const INTEGER: bool>(
         &self,
@@ -336,8 +337,8 @@ impl BoxRay {
                 far_slab(ox, fx, jx),
                 imin8(far_slab(oy, fy, jy), imin8(far_slab(oz, fz, jz), hi)),
             );
-            let (n, f): (wide::i32x8, wide::i32x8) = (bytemuck::cast(near), bytemuck::cast(far));
-            let missed: f32x8 = bytemuck::cast(n.simd_gt(f));
+            let bits = |v: f32x8| -> wide::i32x8 { bytemuck::cast(v) };
+            let missed: f32x8 = bytemuck::cast(bits(near).simd_gt(bits(far)));
             return (!missed.to_bitmask() & 0xff, near.to_array());
         }
         // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval unbounded
@@ -354,8 +355,8 @@ impl BoxRay {
     }
 
     /// Whether `1 / direction` is finite on every axis: a walk instantiated for the ray's
-    /// permutation tests its nodes with integer minima and maxima, which a NaN distance (0 x
-    /// inf, a ray in a slab's plane) would break.
+    /// permutation tests its nodes with integer minima, maxima and compare, which a NaN
+    /// distance (0 x inf, a ray in a slab's plane) would break.
     #[inline(always)]
     pub(super) fn finite_inverse(&self) -> bool {
         self.neg_inv4.is_finite().to_bitmask() == 0b1111

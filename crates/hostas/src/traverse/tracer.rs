@@ -682,11 +682,11 @@ struct BlasAt<'a, 's> {
 /// permutation `P` of the ray (`permutation(boxes.direction()) == P`, for a ray with a finite
 /// inverse), so that preparing the ray for the triangle test and the test itself index
 /// nothing at run time, and the node test reads the dominant axis's planes at constant
-/// offsets and reduces with integer minima and maxima; for other rays with `P` [`ANY_AXES`]
-/// (the general node test, the permutation read at run time); and apart for a structure of
-/// AABBs (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop holds what
-/// only the other needs. Not inlined: the bottom-level loop is the hot one and gets the
-/// registers to itself.
+/// offsets and works with integer minima, maxima and compare; for other rays with `P`
+/// [`ANY_AXES`] (the general node test, the permutation read at run time); and apart for a
+/// structure of AABBs (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop
+/// holds what only the other needs. Not inlined: the bottom-level loop is the hot one and gets
+/// the registers to itself.
 #[inline(never)]
 fn trace_blas<const P: usize, T: LeafTriangles, const TRIANGLES: bool, const FIRST: bool>(
     stack: &mut BlasStack,
