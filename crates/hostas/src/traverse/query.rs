@@ -979,7 +979,7 @@ fn test_aabb(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::traverse::triangle::permutation;
+    use crate::traverse::triangle::{by_permutation, permutation};
     use rand::{Rng, SeedableRng};
 
     /// The node test of a walk instantiated for the ray's permutation reads the dominant
@@ -997,14 +997,7 @@ mod tests {
             (mask, near.map(f32::to_bits))
         }
         fn node_by_permutation<const I: bool>(r: &BoxRay, n: &Node, t: [f32; 2]) -> Test {
-            match permutation(r.direction()) {
-                0 => node_for::<0, I>(r, n, t),
-                1 => node_for::<1, I>(r, n, t),
-                2 => node_for::<2, I>(r, n, t),
-                3 => node_for::<3, I>(r, n, t),
-                4 => node_for::<4, I>(r, n, t),
-                _ => node_for::<5, I>(r, n, t),
-            }
+            by_permutation!(permutation(r.direction()), P => node_for::<P, I>(r, n, t))
         }
         let mut rng = rand_pcg::Pcg64::seed_from_u64(0x5eed_a5e5);
         let mut node = Node::EMPTY;

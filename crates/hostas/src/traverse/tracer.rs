@@ -11,7 +11,7 @@ use super::query::{
     ANY_AXES, BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
 };
 use super::scene::{Hit, HitKind, Scene};
-use super::triangle::{ShearedRay, TriangleHit, permutation};
+use super::triangle::{ShearedRay, TriangleHit, by_permutation, permutation};
 use super::{Ray, RayFlags};
 use crate::error::Result;
 use crate::layout::triangles::{Indexed, TriangleSource, Triangles};
@@ -411,14 +411,9 @@ fn walk_permuted<T: LeafTriangles, const FIRST: bool>(
         // the general node test, and the permutation read at run time (rare rays).
         return trace_blas::<ANY_AXES, T, true, FIRST>(stack, walk, at, tris, local, ray, best);
     }
-    match permutation(local.direction()) {
-        0 => trace_blas::<0, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
-        1 => trace_blas::<1, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
-        2 => trace_blas::<2, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
-        3 => trace_blas::<3, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
-        4 => trace_blas::<4, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
-        _ => trace_blas::<5, T, true, FIRST>(stack, walk, at, tris, local, ray, best),
-    }
+    by_permutation!(permutation(local.direction()), P => {
+        trace_blas::<P, T, true, FIRST>(stack, walk, at, tris, local, ray, best)
+    })
 }
 
 /// A layout's triangles as the bottom-level loop tests them: direct ones in place, indexed

@@ -91,6 +91,40 @@ const PERMUTATION_OF: [u8; 64] = {
     table
 };
 
+/// `$body` with the const `$p` set to the permutation `$perm` (0 to 5, read at run time): one
+/// dispatch for every function instantiated per permutation.
+macro_rules! by_permutation {
+    ($perm:expr, $p:ident => $body:expr) => {
+        match $perm {
+            0 => {
+                const $p: usize = 0;
+                $body
+            }
+            1 => {
+                const $p: usize = 1;
+                $body
+            }
+            2 => {
+                const $p: usize = 2;
+                $body
+            }
+            3 => {
+                const $p: usize = 3;
+                $body
+            }
+            4 => {
+                const $p: usize = 4;
+                $body
+            }
+            _ => {
+                const $p: usize = 5;
+                $body
+            }
+        }
+    };
+}
+pub(crate) use by_permutation;
+
 impl ShearedRay {
     #[inline(always)]
     pub fn new(origin: Vec3, dir: Vec3) -> ShearedRay {
@@ -126,14 +160,7 @@ impl ShearedRay {
     /// zero (the spec culls such triangles unconditionally).
     #[inline(always)]
     pub fn intersect(&self, v: &[f32; 9]) -> Option<TriangleHit> {
-        match self.perm {
-            0 => self.intersect_axes::<0>(v),
-            1 => self.intersect_axes::<1>(v),
-            2 => self.intersect_axes::<2>(v),
-            3 => self.intersect_axes::<3>(v),
-            4 => self.intersect_axes::<4>(v),
-            _ => self.intersect_axes::<5>(v),
-        }
+        by_permutation!(self.perm, P => self.intersect_axes::<P>(v))
     }
 
     /// [`ShearedRay::intersect`] for a ray whose `perm` is `P`, with the axes known at compile
@@ -177,14 +204,7 @@ impl ShearedRay {
     /// [`ShearedRay::intersect_rows`] for the ray's `perm`, known at run time.
     #[inline(always)]
     pub fn intersect_rows_any(&self, rows: &[f32; 12]) -> Option<TriangleHit> {
-        match self.perm {
-            0 => self.intersect_rows::<0>(rows),
-            1 => self.intersect_rows::<1>(rows),
-            2 => self.intersect_rows::<2>(rows),
-            3 => self.intersect_rows::<3>(rows),
-            4 => self.intersect_rows::<4>(rows),
-            _ => self.intersect_rows::<5>(rows),
-        }
+        by_permutation!(self.perm, P => self.intersect_rows::<P>(rows))
     }
 
     /// [`ShearedRay::intersect_axes`] for a triangle given as rows (the x coordinates of its
