@@ -492,12 +492,13 @@ impl LeafTriangles for &[[f32; 9]] {
         u32::MAX
     };
 
-    /// Eight triangles at a time ([`ShearedRay::intersect8`]): each triangle's first eight
-    /// floats are one load and one 8x8 transpose makes them rows. Lanes past the leaf repeat
-    /// its last triangle, whose copies can never be accepted before it; the eight slots from
-    /// the chunk's first are bounds-checked at once (a chunk at the end of the triangles is
-    /// copied and padded). A chunk with an edge function exactly zero in one of its lanes is
-    /// tested one triangle at a time.
+    /// Eight triangles at a time ([`ShearedRay::edges8`], then
+    /// [`Edges8::hits`](super::triangle::Edges8::hits) for a chunk with a covered lane): each
+    /// triangle's first eight floats are one load and one 8x8 transpose makes them rows. Lanes
+    /// past the leaf repeat its last triangle, whose copies can never be accepted before it;
+    /// the eight slots from the chunk's first are bounds-checked at once (a chunk at the end
+    /// of the triangles is copied and padded). A chunk with an edge function exactly zero in
+    /// one of its lanes is tested one triangle at a time.
     #[inline(always)]
     fn nearest<const P: usize, const FIRST: bool>(
         &self,
@@ -534,10 +535,10 @@ impl LeafTriangles for &[[f32; 9]] {
             });
             let [r0, r1, r2, r3, r4, r5, r6, r7] = f32x8::transpose(head);
             let r8 = f32x8::from(std::array::from_fn::<f32, 8, _>(|j| tri(j)[8]));
-            let hits = ray.intersect8::<P>(&[r0, r1, r2, r3, r4, r5, r6, r7, r8]);
+            let edges = ray.edges8::<P>(&[r0, r1, r2, r3, r4, r5, r6, r7, r8]);
             let k = base as u32;
             base += 8;
-            if hits.edge & lanes != 0 {
+            if edges.edge & lanes != 0 {
                 let chunk = self.get(at..at + n)?;
                 nearest_one_by_one::<P, FIRST>(ray, chunk, k, t_min, &mut t_max, &mut best);
                 if FIRST && best.is_some() {
@@ -545,6 +546,10 @@ impl LeafTriangles for &[[f32; 9]] {
                 }
                 continue;
             }
+            if edges.covered & lanes == 0 {
+                continue;
+            }
+            let hits = edges.hits(ray);
             let t = hits.t;
             let range = t.simd_gt(f32x8::splat(t_min)) & t.simd_lt(f32x8::splat(t_max));
             let in_range = hits.hit & lanes & range.to_bitmask();

@@ -261,7 +261,7 @@ impl ShearedRay {
     }
 }
 
-/// Eight triangles' [`ShearedRay::intersect8`] results, lane `j` for triangle `j`.
+/// Eight triangles' [`Edges8::hits`] results, lane `j` for triangle `j`.
 pub struct Hits8 {
     pub t: f32x8,
     pub det: f32x8,
@@ -269,11 +269,8 @@ pub struct Hits8 {
     pub v: f32x8,
     pub w: f32x8,
     /// Lanes the ray hits (at any `t`): what [`ShearedRay::intersect_axes`] returns `Some` for,
-    /// among the lanes not in `edge`.
+    /// among the lanes not in [`Edges8::edge`].
     pub hit: u32,
-    /// Lanes with an edge function exactly zero, which only the scalar test decides (its
-    /// exact recomputation and top-left rule).
-    pub edge: u32,
 }
 
 impl Hits8 {
@@ -287,13 +284,32 @@ impl Hits8 {
     }
 }
 
+/// The first half of the eight-lane test ([`ShearedRay::edges8`]): the edge functions and
+/// which lanes they decide. The second half ([`Edges8::hits`]) is only worth its division
+/// where some lane is `covered`: most leaves a ray reaches hold no triangle it passes through.
+#[derive(Clone, Copy)]
+pub struct Edges8 {
+    u: f32x8,
+    v: f32x8,
+    w: f32x8,
+    /// Each vertex's component on the ray's dominant axis, relative to the origin.
+    z: [f32x8; 3],
+    /// Lanes with an edge function exactly zero, which only the scalar test decides (its
+    /// exact recomputation and top-left rule).
+    pub edge: u32,
+    /// Lanes (not in `edge`) whose edge functions share a sign: the ray passes through the
+    /// triangle's plane inside it, a hit unless the determinant is zero or `t` NaN.
+    pub covered: u32,
+}
+
 impl ShearedRay {
-    /// [`ShearedRay::intersect_axes`] for eight triangles at once: `rows[3 * i + k]` holds
-    /// component `k` of vertex `i` of each lane's triangle. Every lane takes the scalar
-    /// test's operations in the same order (no fused products), so a lane's `t`, edge
-    /// functions and determinant are the scalar test's bits.
+    /// [`ShearedRay::intersect_axes`] for eight triangles at once, up to the edge functions:
+    /// `rows[3 * i + k]` holds component `k` of vertex `i` of each lane's triangle. Every
+    /// lane takes the scalar test's operations in the same order (no fused products), so a
+    /// lane's edge functions, and then its determinant and `t` ([`Edges8::hits`]), are the
+    /// scalar test's bits.
     #[inline(always)]
-    pub fn intersect8<const P: usize>(&self, rows: &[f32x8; 9]) -> Hits8 {
+    pub fn edges8<const P: usize>(&self, rows: &[f32x8; 9]) -> Edges8 {
         let (kx, ky, kz) = AXES[P];
         let s = f32x8::splat;
         let o = self.origin.map(s);
@@ -309,19 +325,29 @@ impl ShearedRay {
         let edge = u.simd_eq(zero) | v.simd_eq(zero) | w.simd_eq(zero);
         let mixed = (u.simd_lt(zero) | v.simd_lt(zero) | w.simd_lt(zero))
             & (u.simd_gt(zero) | v.simd_gt(zero) | w.simd_gt(zero));
-        let det = u + v + w;
-        let sz = s(self.sz);
-        let t = (u * (sz * a[kz]) + v * (sz * b[kz]) + w * (sz * c[kz])) / det;
-        // `t == t`: not NaN. A zero determinant or mixed signs miss, as in `hit`.
-        let hit = !(edge | mixed) & det.simd_ne(zero) & t.simd_eq(t);
-        Hits8 {
-            t,
-            det,
+        Edges8 {
+            u,
             v,
             w,
-            hit: hit.to_bitmask(),
+            z: [a[kz], b[kz], c[kz]],
             edge: edge.to_bitmask(),
+            covered: (!(edge | mixed)).to_bitmask(),
         }
+    }
+}
+
+impl Edges8 {
+    /// The test's second half for `ray` (the one [`ShearedRay::edges8`] was made with).
+    #[inline(always)]
+    pub fn hits(&self, ray: &ShearedRay) -> Hits8 {
+        let Edges8 { u, v, w, z, .. } = *self;
+        let zero = f32x8::ZERO;
+        let det = u + v + w;
+        let sz = f32x8::splat(ray.sz);
+        let t = (u * (sz * z[0]) + v * (sz * z[1]) + w * (sz * z[2])) / det;
+        // `t == t`: not NaN. A zero determinant or mixed signs miss, as in `hit`.
+        let hit = self.covered & (det.simd_ne(zero) & t.simd_eq(t)).to_bitmask();
+        Hits8 { t, det, v, w, hit }
     }
 }
 
