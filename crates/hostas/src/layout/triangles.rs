@@ -72,13 +72,25 @@ impl Indexed<'_> {
     }
 }
 
+/// From this many shared vertices (3 MiB of them, past the L2 caches of current cores) a
+/// pushed leaf's vertices are requested with its records.
+const PREFETCH_VERTICES_FROM: usize = 1 << 18;
+
 impl TriangleSource for Indexed<'_> {
     #[inline(always)]
     fn prefetch(&self, first: usize, _count: usize) {
-        // A leaf's records (at most 15 of 8 bytes) and, where the first one is already in the
-        // caches, nothing more: the vertices' addresses are only known once it is read.
+        // A leaf's records (at most 15 of 8 bytes), and in a large structure the line of its
+        // first vertex (a leaf's vertices are numbered together, so that line holds most of
+        // them). That request waits for the record: where the vertices stay in the caches it
+        // only costs (primary rays on the Xeon: bunny, Sponza, conference 8-14% slower), past
+        // them it saves a miss per leaf tested (incoherent rays: the 1M sphere +11%, boxes +8%).
         if let Some(r) = self.records.get(first) {
             crate::math::prefetch(r);
+            if self.vertices.len() >= PREFETCH_VERTICES_FROM {
+                if let Some(v) = self.vertices.get(r.a as usize) {
+                    crate::math::prefetch(v);
+                }
+            }
         }
     }
 }
