@@ -1032,7 +1032,7 @@ mod tests {
 
     /// The ranks put four to eight hit children in the insertion sort's order (nearest on
     /// top, a later lane nearer on a tie): on random distances, coarse ones (ties), both
-    /// signed zeros and the largest float, and every mask of four or more lanes.
+    /// signed zeros and the largest float, on random masks of four or more lanes.
     #[test]
     fn ranks_give_the_insertion_sort_order() {
         let mut rng = rand_pcg::Pcg64::seed_from_u64(0x5a4c);
