@@ -95,27 +95,14 @@ const PERMUTATION_OF: [u8; 64] = {
 /// dispatch for every function instantiated per permutation.
 macro_rules! by_permutation {
     ($perm:expr, $p:ident => $body:expr) => {
+        by_permutation!(@arms $perm, $p, $body, 0 1 2 3 4)
+    };
+    (@arms $perm:expr, $p:ident, $body:expr, $($k:literal)*) => {
         match $perm {
-            0 => {
-                const $p: usize = 0;
+            $($k => {
+                const $p: usize = $k;
                 $body
-            }
-            1 => {
-                const $p: usize = 1;
-                $body
-            }
-            2 => {
-                const $p: usize = 2;
-                $body
-            }
-            3 => {
-                const $p: usize = 3;
-                $body
-            }
-            4 => {
-                const $p: usize = 4;
-                $body
-            }
+            })*
             _ => {
                 const $p: usize = 5;
                 $body
