@@ -50,8 +50,9 @@ pub fn build(
 /// fresh memory costs the OS zeroing it (a fifth of a 70k-triangle fast build).
 static SPARE_SCRATCH: Mutex<Option<HostMemory>> = Mutex::new(None);
 
-/// At most this much scratch is kept between builds (a 3M-triangle build's).
-const SPARE_SCRATCH_MAX: usize = 256 << 20;
+/// At most this much scratch is kept between builds (a triangle build takes about 116 bytes per
+/// triangle: 1 GiB is a 9M-triangle build's; the 3.5M-triangle crown's is 391 MiB).
+const SPARE_SCRATCH_MAX: usize = 1 << 30;
 
 /// Keeps `scratch` for the next build unless a larger one is kept already.
 fn keep_scratch(scratch: HostMemory) {
