@@ -129,6 +129,10 @@ impl Drop for HostMemory {
     }
 }
 
+/// The most freed memory kept for later allocations: by [`spare`] in all, and by
+/// `quick::build` for its scratch (a 9M-triangle build's).
+pub(crate) const KEPT_MAX: usize = 1 << 30;
+
 /// Mappings of dropped memory, kept for the next allocations of about their size (as
 /// allocators such as jemalloc keep freed pages for a while): an application that destroys a
 /// structure and builds the next one would otherwise have the OS fault in and zero fresh pages
@@ -145,7 +149,7 @@ mod spare {
     /// (and for `quick`'s scratch) its builds faulted in fresh pages every time, and the
     /// crown's builds ran at 0.94x (fast trace) and 0.83x (fast build) of their speed now on
     /// the Xeon.
-    const BYTES: usize = 1 << 30;
+    const BYTES: usize = super::KEPT_MAX;
     const COUNT: usize = 8;
     const AGE: Duration = Duration::from_secs(2);
 

@@ -51,8 +51,9 @@ pub fn build(
 static SPARE_SCRATCH: Mutex<Option<HostMemory>> = Mutex::new(None);
 
 /// At most this much scratch is kept between builds (a triangle build takes about 116 bytes per
-/// triangle: 1 GiB is a 9M-triangle build's; the 3.5M-triangle crown's is 391 MiB).
-const SPARE_SCRATCH_MAX: usize = 1 << 30;
+/// triangle: 1 GiB is a 9M-triangle build's; the 3.5M-triangle crown's is 391 MiB), the same
+/// limit as for dropped structures' memory.
+const SPARE_SCRATCH_MAX: usize = crate::memory::KEPT_MAX;
 
 /// Keeps `scratch` for the next build unless a larger one is kept already.
 fn keep_scratch(scratch: HostMemory) {
