@@ -35,7 +35,31 @@ fn find_header() -> PathBuf {
     );
 }
 
+/// The `-C target-cpu` the Rust code is built for (the last one in the flags; "generic" when
+/// none), so that the report says what code it measured.
+fn target_cpu() -> String {
+    let flags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
+    let flags: Vec<&str> = flags.split('\x1f').collect();
+    let mut cpu = "generic".to_string();
+    for (i, f) in flags.iter().enumerate() {
+        let value = f
+            .strip_prefix("-Ctarget-cpu=")
+            .or_else(|| f.strip_prefix("target-cpu="))
+            .or_else(|| {
+                (*f == "-C")
+                    .then(|| flags.get(i + 1).and_then(|v| v.strip_prefix("target-cpu=")))
+                    .flatten()
+            });
+        if let Some(v) = value {
+            cpu = v.to_string();
+        }
+    }
+    cpu
+}
+
 fn main() {
+    println!("cargo:rerun-if-env-changed=CARGO_ENCODED_RUSTFLAGS");
+    println!("cargo:rustc-env=PEERS_TARGET_CPU={}", target_cpu());
     let header = find_header();
     let include_dir = header.parent().unwrap().to_path_buf();
     println!("cargo:rerun-if-changed=shim/tb_shim.cpp");

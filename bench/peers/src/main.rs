@@ -232,6 +232,9 @@ fn main() {
             None => format!("{}.", util::pinning_note(pin_cpu)),
         }
     );
+    let machine = util::machine();
+    let compiled_for = util::compiled_for();
+    println!("Machine: {machine}. Rust code compiled for {compiled_for}.");
     println!(
         "Versions: Embree {}, tinybvh 1.6.8 (tinybvh-rs 0.1.0-beta.3 header, C++ shim), obvhs 0.4.0, hostas {}.",
         peers::embree::version(),
@@ -362,7 +365,8 @@ fn main() {
                 "scene_summary": sc.name, "tris": sc.tri_count(), "source": sc.source, "seconds": rep.seconds,
                 "threads": threads, "rays_per_kind": args.rays * args.rays,
                 "check_reference": rep.reference.map(|i| rep.rows[i].name()), "notes": rep.notes,
-                "hostas": option_env!("PEERS_GIT_REV"),
+                "hostas": option_env!("PEERS_GIT_REV"), "machine": machine,
+                "compiled_for": compiled_for,
             });
             writeln!(j, "{summary}").unwrap();
             for l in rep.json_lines() {

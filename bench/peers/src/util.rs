@@ -87,6 +87,60 @@ pub fn available_threads() -> usize {
         .unwrap_or(1)
 }
 
+/// The processor and memory settings the run is on (Linux; "unknown" elsewhere): the model
+/// name, its family, model and stepping (the name alone does not tell a lent Xeon's generation),
+/// and the transparent huge page mode, which decides whether the applications' buffers are in
+/// huge pages.
+pub fn machine() -> String {
+    let cpuinfo = std::fs::read_to_string("/proc/cpuinfo").unwrap_or_default();
+    let field = |key: &str| {
+        cpuinfo
+            .lines()
+            .take_while(|l| !l.trim().is_empty())
+            .find_map(|l| {
+                let (k, v) = l.split_once(':')?;
+                (k.trim() == key).then(|| v.trim().to_string())
+            })
+    };
+    let name = field("model name").unwrap_or_else(|| "unknown processor".into());
+    let ids = match (field("cpu family"), field("model"), field("stepping")) {
+        (Some(f), Some(m), Some(s)) => format!(" (family {f}, model {m}, stepping {s})"),
+        _ => String::new(),
+    };
+    let thp = std::fs::read_to_string("/sys/kernel/mm/transparent_hugepage/enabled")
+        .ok()
+        .and_then(|t| {
+            let start = t.find('[')?;
+            let end = t[start..].find(']')? + start;
+            Some(t[start + 1..end].to_string())
+        })
+        .unwrap_or_else(|| "unknown".into());
+    format!("{name}{ids}, transparent huge pages {thp}")
+}
+
+/// What the Rust code (hostas, obvhs, this program) was compiled for: the `-C target-cpu` and
+/// the widest x86 vector extensions it may use.
+pub fn compiled_for() -> String {
+    let features = [
+        ("avx512vl", cfg!(target_feature = "avx512vl")),
+        ("avx512f", cfg!(target_feature = "avx512f")),
+        ("fma", cfg!(target_feature = "fma")),
+        ("avx2", cfg!(target_feature = "avx2")),
+        ("avx", cfg!(target_feature = "avx")),
+        ("sse4.1", cfg!(target_feature = "sse4.1")),
+    ];
+    let on: Vec<&str> = features.iter().filter(|f| f.1).map(|f| f.0).collect();
+    format!(
+        "target-cpu {} ({})",
+        env!("PEERS_TARGET_CPU"),
+        if on.is_empty() {
+            "none of avx512vl, avx512f, fma, avx2, avx, sse4.1".to_string()
+        } else {
+            on.join(", ")
+        }
+    )
+}
+
 /// The 1-minute load average (Linux), to flag runs on a busy machine.
 pub fn loadavg() -> Option<f64> {
     std::fs::read_to_string("/proc/loadavg")
