@@ -87,7 +87,7 @@ pub fn available_threads() -> usize {
         .unwrap_or(1)
 }
 
-/// The processor and memory settings the run is on (Linux; "unknown" elsewhere): the model
+/// The processor and memory settings the run is on (Linux; "unknown" parts elsewhere): the model
 /// name, its family, model and stepping (the name alone does not tell a lent Xeon's generation),
 /// and the transparent huge page mode, which decides whether the applications' buffers are in
 /// huge pages.
@@ -119,7 +119,7 @@ pub fn machine() -> String {
 }
 
 /// What the Rust code (hostas, obvhs, this program) was compiled for: the `-C target-cpu` and
-/// the widest x86 vector extensions it may use.
+/// which of the x86 vector extensions that matter here it may use.
 pub fn compiled_for() -> String {
     let features = [
         ("avx512vl", cfg!(target_feature = "avx512vl")),
