@@ -487,6 +487,18 @@ fn bench_json_lines() {
     let out = ok(&o);
     assert_eq!(out.lines().count(), 2, "{out}");
     assert!(stderr(&o).contains("absent"), "{}", stderr(&o));
+    // The note on the build's vector code: exactly when this build (the test's flags are the
+    // binary's) has no AVX2 and the processor has it.
+    #[cfg(target_arch = "x86_64")]
+    {
+        let narrower = !cfg!(target_feature = "avx2") && std::is_x86_feature_detected!("avx2");
+        assert_eq!(
+            stderr(&o).contains("target-cpu=native"),
+            narrower,
+            "{}",
+            stderr(&o)
+        );
+    }
     std::fs::create_dir(f.path("empty")).unwrap();
     fails(
         &f.run(&["bench", "--no-builtin", "--meshes", "empty"]),
