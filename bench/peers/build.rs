@@ -38,23 +38,14 @@ fn find_header() -> PathBuf {
 /// The `-C target-cpu` the Rust code is built for (the last one in the flags; "generic" when
 /// none), so that the report says what code it measured.
 fn target_cpu() -> String {
+    // Each flag is one element: `-Ctarget-cpu=X`, or `-C` then `target-cpu=X`; the last wins.
     let flags = std::env::var("CARGO_ENCODED_RUSTFLAGS").unwrap_or_default();
-    let flags: Vec<&str> = flags.split('\x1f').collect();
-    let mut cpu = "generic".to_string();
-    for (i, f) in flags.iter().enumerate() {
-        let value = f
-            .strip_prefix("-Ctarget-cpu=")
-            .or_else(|| f.strip_prefix("target-cpu="))
-            .or_else(|| {
-                (*f == "-C")
-                    .then(|| flags.get(i + 1).and_then(|v| v.strip_prefix("target-cpu=")))
-                    .flatten()
-            });
-        if let Some(v) = value {
-            cpu = v.to_string();
-        }
-    }
-    cpu
+    flags
+        .split('\x1f')
+        .filter_map(|f| f.trim_start_matches("-C").strip_prefix("target-cpu="))
+        .next_back()
+        .unwrap_or("generic")
+        .to_string()
 }
 
 fn main() {

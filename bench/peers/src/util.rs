@@ -130,15 +130,13 @@ pub fn compiled_for() -> String {
         ("sse4.1", cfg!(target_feature = "sse4.1")),
     ];
     let on: Vec<&str> = features.iter().filter(|f| f.1).map(|f| f.0).collect();
-    format!(
-        "target-cpu {} ({})",
-        env!("PEERS_TARGET_CPU"),
-        if on.is_empty() {
-            "none of avx512vl, avx512f, fma, avx2, avx, sse4.1".to_string()
-        } else {
-            on.join(", ")
-        }
-    )
+    let listed = if on.is_empty() {
+        let all: Vec<&str> = features.iter().map(|f| f.0).collect();
+        format!("none of {}", all.join(", "))
+    } else {
+        on.join(", ")
+    };
+    format!("target-cpu {} ({listed})", env!("PEERS_TARGET_CPU"))
 }
 
 /// The 1-minute load average (Linux), to flag runs on a busy machine.
