@@ -45,6 +45,6 @@ pub use input::{
 pub use math::{Aabb, Affine};
 pub use memory::{Buffer, HostMemory};
 pub use traverse::{
-    CandidateType, CommittedType, Hit, HitKind, Intersection, Ray, RayFlags, RayQuery, Scene,
-    Tracer,
+    CandidateType, CommittedType, Hit, HitKind, Interleave, Intersection, Ray, RayFlags, RayQuery,
+    Scene, Tracer,
 };

@@ -96,22 +96,34 @@ fn trace_blas(
 }
 
 fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
-    // A Tracer reuses its views and stack across rays (the batch path of hostas).
+    // hostas's batch path: a Tracer reuses its views and stacks across rays, and
+    // `closest_batch` walks rays several at once where that measured faster (rays that do not
+    // share an origin, through a bottom level of 16 MiB or more); each ray's hit is the one
+    // `Tracer::closest` gives it. Batches of 4096 (their rays and hits stay in the caches).
     let mut tracer = scene.tracer();
-    for (r, h) in rays.iter().zip(hits.iter_mut()) {
-        let hit = tracer
-            .closest(&hostas::Ray::new(r.o, r.d))
-            .expect("trace_closest");
-        *h = if hit.is_hit() {
-            Hit {
-                t: hit.t,
-                prim: hit.primitive_index,
-            }
-        } else {
-            Hit::MISS
-        };
+    let mut batch = Vec::with_capacity(BATCH);
+    let mut found = Vec::with_capacity(BATCH);
+    for (rs, hs) in rays.chunks(BATCH).zip(hits.chunks_mut(BATCH)) {
+        batch.clear();
+        batch.extend(rs.iter().map(|r| hostas::Ray::new(r.o, r.d)));
+        tracer
+            .closest_batch(&batch, &mut found)
+            .expect("closest_batch");
+        for (h, hit) in hs.iter_mut().zip(&found) {
+            *h = if hit.is_hit() {
+                Hit {
+                    t: hit.t,
+                    prim: hit.primitive_index,
+                }
+            } else {
+                Hit::MISS
+            };
+        }
     }
 }
+
+/// Rays per [`hostas::Tracer::closest_batch`] call.
+const BATCH: usize = 4096;
 
 fn run_preset(
     scene: &Scene,

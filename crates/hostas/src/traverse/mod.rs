@@ -5,6 +5,7 @@
 //! structure its instances reference, locked for reading while rays are traced, and offers
 //! batch calls for closest-hit and any-hit tracing.
 
+mod interleaved;
 mod query;
 mod scene;
 mod tracer;
@@ -12,7 +13,7 @@ pub mod triangle;
 
 pub use query::{CandidateType, CommittedType, Intersection, RayQuery};
 pub use scene::{Hit, HitKind, Scene};
-pub use tracer::Tracer;
+pub use tracer::{Interleave, Tracer};
 
 use crate::error::{Error, Location, Result};
 use crate::layout::PrimKind;

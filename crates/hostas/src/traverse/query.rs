@@ -595,7 +595,7 @@ fn ranks(t: &[f32; WIDTH], mask: u32) -> [u32; WIDTH] {
 /// Requests a pushed child now, so that its misses overlap the rest of the walk: an inner
 /// node's four lines, or a leaf's first lines ([`TriangleSource::prefetch`]).
 #[inline(always)]
-fn warm(nodes: &[Node], triangles: impl TriangleSource, e: &Entry) {
+pub(super) fn warm(nodes: &[Node], triangles: impl TriangleSource, e: &Entry) {
     if e.child & LEAF_BIT == 0 {
         if let Some(n) = nodes.get(e.child as usize) {
             let r = n.rows();
