@@ -207,11 +207,6 @@ impl Scene {
         super::Tracer::new(self)
     }
 
-    /// The size in bytes of bottom-level structure `index` (0 if there is none).
-    pub(crate) fn blas_size(&self, index: u32) -> usize {
-        self.blases.get(index as usize).map_or(0, |r| r.range.len())
-    }
-
     pub(crate) fn blas_view_for(&self, instance_slot: u32) -> Option<View<'_>> {
         let b = *self.instance_blas.get(instance_slot as usize)?;
         let r = self.blases.get(b as usize)?;
