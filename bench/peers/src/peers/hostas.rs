@@ -9,9 +9,13 @@
 //!   buffer memory's contents are undefined, as after `vkAllocateMemory`, and builds do not
 //!   depend on them) rather than have the OS fault in fresh pages: the warm-up build is the
 //!   only one that pays for fresh pages.
-//! - Trace: `Scene::trace_closest` over a single-instance TLAS (identity transform) built with
+//! - Trace: `Tracer::closest_batch` (batches of 1024 rays; each ray's hit is the one
+//!   `Tracer::closest` gives it) over a single-instance TLAS (identity transform) built with
 //!   `quick::build_single_instance_tlas`: ray queries always start at a TLAS in Vulkan, so
 //!   hostas pays for one instance level that the peers (which trace the BLAS directly) do not.
+//!   Rays that do not share an origin, through a structure of 16 MiB or more, are walked eight
+//!   at a time (the 1M-triangle scenes' and the crown's incoherent rays); every other ray one
+//!   at a time, as `Tracer::closest`.
 //! - SAH and bytes: what `Device::statistics` reports: `sah_cost` (node visit 1, primitive
 //!   test 1, relative to the root box, on hostas's own 8-wide tree, so it is not the same
 //!   quantity as the binary-tree SAH of the peers) and `used_bytes` (header, geometry records,
@@ -99,9 +103,10 @@ fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
     // hostas's batch path: a Tracer reuses its views and stacks across rays, and
     // `closest_batch` walks rays several at once where that measured faster (rays that do not
     // share an origin, through a bottom level of 16 MiB or more); each ray's hit is the one
-    // `Tracer::closest` gives it. Batches of 256: their rays and hits stay in the first-level
-    // cache (batches of 4096, 360 KiB of rays and hits, cost one ray at a time 6% more
-    // instructions and up to a fifth of the primary rays' speed on the Xeon).
+    // `Tracer::closest` gives it. Batches of 1024: each permutation's share of a batch is
+    // walked eight rays at a time, slower at its end, where fewer than eight remain (batches
+    // of 256 lost most of the boxes' gain, 1.34x with 4096), while the batch's rays and hits
+    // (360 bytes per ray) should stay near the core for the rays traced one at a time.
     let mut tracer = scene.tracer();
     let mut batch = Vec::with_capacity(BATCH);
     let mut found = Vec::with_capacity(BATCH);
@@ -125,7 +130,7 @@ fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
 }
 
 /// Rays per [`hostas::Tracer::closest_batch`] call.
-const BATCH: usize = 256;
+const BATCH: usize = 1024;
 
 fn run_preset(
     scene: &Scene,
