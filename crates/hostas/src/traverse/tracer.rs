@@ -63,8 +63,9 @@ struct Direct<'s> {
 /// [`Tracer::closest_batch`]: where most of a walk's loads miss the caches near the core and
 /// the wait for them, not the work, is the cost. On the Xeon the table is measured on, four
 /// rounds alternated against one ray at a time (the twenty-sixth session): incoherent rays
-/// 1.29-1.71x as fast on the 1M-triangle scenes (29-52 MB), 0.76-1.10x on the meshes (2.4-12
-/// MB), where the interleaving's own work costs more than the waits it hides.
+/// 1.29-1.71x as fast on the 1M-triangle scenes (29-52 MB used), 0.76-1.10x on the meshes
+/// (2.4-12 MB), where the interleaving's own work costs more than the waits it hides; the
+/// crown (126 MB, whose rays end after a few nodes) about the same (1.05x, three rounds).
 const INTERLEAVE_FROM_BYTES: u64 = 16 << 20;
 
 impl<'s> Direct<'s> {
@@ -111,16 +112,19 @@ impl Drop for Tracer<'_> {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Interleave {
     /// Several at once where that measured faster: rays that do not share an origin through a
-    /// bottom level of 16 MiB or more, the scene's only instance (an identity one).
+    /// bottom level of 16 MiB or more (used), the scene's only instance (an identity one).
     #[default]
     Auto,
     /// Several at once wherever the scene allows (one identity instance of triangles; rays
-    /// with culling flags, `TERMINATE_ON_FIRST_HIT` or a zero direction component are still
-    /// traced one at a time).
+    /// with culling flags, `TERMINATE_ON_FIRST_HIT`, a cull mask the instance does not meet or
+    /// a direction component whose inverse is not finite are still traced one at a time).
     Always,
     /// One at a time, as [`Tracer::closest`].
     Never,
 }
+
+/// The most rays [`Tracer::closest_batch_with`] orders at once (longer batches are split).
+const MAX_BATCH: usize = 1 << 30;
 
 /// Whether most consecutive rays of `rays` start at the same point (a camera's primary rays):
 /// such rays visit the same nodes one after another, which one ray at a time finds in the
@@ -211,6 +215,15 @@ impl<'s> Tracer<'s> {
         interleave: Interleave,
     ) -> Result<()> {
         hits.clear();
+        if rays.len() > MAX_BATCH {
+            // (Rays are numbered by `u32` below.)
+            let mut part = Vec::new();
+            for chunk in rays.chunks(MAX_BATCH) {
+                self.closest_batch_with(chunk, &mut part, interleave)?;
+                hits.append(&mut part);
+            }
+            return Ok(());
+        }
         let direct = self.direct.as_ref().filter(|d| {
             d.view.prim_kind == PrimKind::Triangles
                 && match interleave {
