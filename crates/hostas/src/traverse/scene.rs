@@ -260,18 +260,36 @@ impl Scene {
     }
 
     /// Traces a batch of rays on all threads of the current rayon pool: closest hits, or any
-    /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order.
+    /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order. Closest
+    /// hits go through [`Tracer::closest_batch`](super::Tracer::closest_batch) in chunks of
+    /// [`TRACE_CHUNK`] rays (interleaved walks where they pay).
     pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
         use rayon::prelude::*;
-        rays.par_iter()
-            .with_min_len(256)
+        if any_hit {
+            return rays
+                .par_iter()
+                .with_min_len(256)
+                .map_init(|| self.tracer(), |t, r| t.any(r))
+                .collect();
+        }
+        let chunks: Vec<Vec<Hit>> = rays
+            .par_chunks(TRACE_CHUNK)
             .map_init(
                 || self.tracer(),
-                |t, r| if any_hit { t.any(r) } else { t.closest(r) },
+                |t, chunk| {
+                    let mut hits = Vec::with_capacity(chunk.len());
+                    t.closest_batch(chunk, &mut hits).map(|()| hits)
+                },
             )
-            .collect()
+            .collect::<Result<_>>()?;
+        Ok(chunks.concat())
     }
 }
+
+/// Rays per [`Tracer::closest_batch`](super::Tracer::closest_batch) call in
+/// [`Scene::trace_batch`]: enough for each axis permutation's share to keep eight walks in
+/// flight most of the time, few enough for a thread's share of work to balance.
+const TRACE_CHUNK: usize = 1024;
 
 // Scenes are shared by the threads that trace through them.
 const _: () = {

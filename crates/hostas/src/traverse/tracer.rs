@@ -150,6 +150,20 @@ pub(super) struct Best {
 }
 
 impl Best {
+    /// No hit yet, in a range up to `t`.
+    #[inline(always)]
+    fn miss(t: f32) -> Best {
+        Best {
+            t,
+            kind: HitKind::Miss,
+            instance_slot: 0,
+            blas: 0,
+            prim_slot: 0,
+            barycentrics: [0.0; 2],
+            front_face: false,
+        }
+    }
+
     /// Makes the triangle hit `h` in stored slot `prim_slot` the nearest so far (`front`: its
     /// facing after the instance's `FLIP_FACING`).
     #[inline(always)]
@@ -283,15 +297,7 @@ impl<'s> Tracer<'s> {
         }
         let mut stacks = std::mem::take(&mut self.stacks);
         stacks.resize(interleaved::LANES, [Entry::default(); STACK_CAPACITY]);
-        let miss = Best {
-            t: f32::INFINITY,
-            kind: HitKind::Miss,
-            instance_slot: 0,
-            blas: 0,
-            prim_slot: 0,
-            barycentrics: [0.0; 2],
-            front_face: false,
-        };
+        let miss = Best::miss(f32::INFINITY);
         let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
         if let Some(lanes) = stacks.first_chunk_mut::<{ interleaved::LANES }>() {
             for perm in 0..ONE_BY_ONE as usize {
@@ -337,15 +343,7 @@ impl<'s> Tracer<'s> {
 
     fn trace(&mut self, ray: &Ray, first_hit: bool) -> Result<Hit> {
         ray.validate()?;
-        let mut best = Best {
-            t: ray.t_max,
-            kind: HitKind::Miss,
-            instance_slot: 0,
-            blas: 0,
-            prim_slot: 0,
-            barycentrics: [0.0; 2],
-            front_face: false,
-        };
+        let mut best = Best::miss(ray.t_max);
         if let Some(d) = &self.direct {
             if d.mask & ray.cull_mask != 0 && ray.flags.0 & d.skip == 0 {
                 let boxes = BoxRay::new(ray.origin, ray.direction);
