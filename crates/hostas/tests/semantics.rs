@@ -799,7 +799,7 @@ fn batch_tracing_matches_single_rays() {
 #[test]
 fn closest_batch_matches_closest() {
     let mut r = generate::rng(0xba7c4);
-    let mut interleaved = 0;
+    let mut hit_count = 0;
     for round in 0..24 {
         let adversarial = round % 2 == 1;
         let desc = if round % 4 == 3 {
@@ -851,12 +851,12 @@ fn closest_batch_matches_closest() {
                     *hit, single,
                     "round {round}, {mode:?}, batch of {len}, ray {k}: {ray:?}"
                 );
-                interleaved += usize::from(hit.is_hit());
+                hit_count += usize::from(hit.is_hit());
             }
         }
     }
     // The scenes must produce hits, not only misses.
-    assert!(interleaved > 5000, "{interleaved} hits");
+    assert!(hit_count > 5000, "{hit_count} hits");
 }
 
 /// A batch with an invalid ray reports that ray's error, as `Tracer::closest` would.

@@ -39,8 +39,8 @@ struct Lane {
 
 /// Walks the rays `order` (indices into `rays`, every one with permutation `P` and a finite
 /// inverse) through the bottom level `view` of instance `inst`, triangles `tris`, [`LANES`]
-/// at a time, and writes each ray's hit to `hits` (as long as `rays`). `miss`: the hit
-/// record of a ray that accepted nothing yet. `flip`: the instance flips facing.
+/// at a time, and writes each ray's hit to `hits` (as long as `rays`). `flip`: the instance
+/// flips facing.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 pub(super) fn closest<const P: usize, T: LeafTriangles>(
@@ -51,7 +51,6 @@ pub(super) fn closest<const P: usize, T: LeafTriangles>(
     rays: &[Ray],
     order: &[u32],
     stacks: &mut [BlasStack; LANES],
-    miss: Best,
     hits: &mut [Hit],
 ) {
     let mut queue = order.iter();
@@ -59,7 +58,7 @@ pub(super) fn closest<const P: usize, T: LeafTriangles>(
         boxes: BoxRay::new([0.0; 3], [1.0; 3]),
         sheared: ShearedRay::new([0.0; 3], [1.0; 3]),
         t_min: 0.0,
-        best: miss,
+        best: Best::miss(f32::INFINITY),
         sp: 0,
         cur: Entry::default(),
         ray: 0,
@@ -126,8 +125,7 @@ fn start<const P: usize, T: LeafTriangles>(
         lane.boxes = boxes;
         lane.sheared = boxes.sheared::<P>();
         lane.t_min = ray.t_min;
-        lane.best.t = ray.t_max;
-        lane.best.kind = super::HitKind::Miss;
+        lane.best = Best::miss(ray.t_max);
         lane.cur = cur;
         lane.ray = i as usize;
         return true;

@@ -152,7 +152,7 @@ pub(super) struct Best {
 impl Best {
     /// No hit yet, in a range up to `t`.
     #[inline(always)]
-    fn miss(t: f32) -> Best {
+    pub(super) fn miss(t: f32) -> Best {
         Best {
             t,
             kind: HitKind::Miss,
@@ -297,7 +297,6 @@ impl<'s> Tracer<'s> {
         }
         let mut stacks = std::mem::take(&mut self.stacks);
         stacks.resize(interleaved::LANES, [Entry::default(); STACK_CAPACITY]);
-        let miss = Best::miss(f32::INFINITY);
         let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
         if let Some(lanes) = stacks.first_chunk_mut::<{ interleaved::LANES }>() {
             for perm in 0..ONE_BY_ONE as usize {
@@ -309,10 +308,10 @@ impl<'s> Tracer<'s> {
                 }
                 by_permutation!(perm, P => match view.triangles {
                     Triangles::Direct(t) => interleaved::closest::<P, _>(
-                        &view, inst, t, flip, rays, group, lanes, miss, hits,
+                        &view, inst, t, flip, rays, group, lanes, hits,
                     ),
                     Triangles::Indexed(t) => interleaved::closest::<P, _>(
-                        &view, inst, t, flip, rays, group, lanes, miss, hits,
+                        &view, inst, t, flip, rays, group, lanes, hits,
                     ),
                 });
             }
