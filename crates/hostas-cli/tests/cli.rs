@@ -688,6 +688,15 @@ fn corrupt_and_truncated_inputs_fail_cleanly() {
         ]),
         "ray 2",
     );
+    // Past the first chunk of rays the command traces at once, the index is still the file's.
+    let mut rays = test_rays().repeat(5000_usize.div_ceil(test_rays().len()));
+    rays[4500].t_max = -1.0;
+    f.write("late.bin", &rays_file(&rays));
+    let e = fails(
+        &f.run(&["trace", "ball.obj", "--rays", "late.bin", "--hits", "h.bin"]),
+        "ray 4500: VUID-RuntimeSpirv-OpRayQueryInitializeKHR-06349",
+    );
+    assert!(e.trim_end().ends_with("must be non-negative"), "{e}");
 }
 
 #[test]

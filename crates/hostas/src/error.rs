@@ -16,6 +16,9 @@ pub struct Location {
     pub geometry: Option<u32>,
     /// Primitive (triangle, AABB or instance) index within the geometry's range.
     pub primitive: Option<u32>,
+    /// Index of the ray in a batch ([`Tracer::closest_batch`](crate::Tracer::closest_batch),
+    /// [`Scene::trace_batch`](crate::Scene::trace_batch)).
+    pub ray: Option<u64>,
 }
 
 impl Location {
@@ -23,6 +26,7 @@ impl Location {
         info: None,
         geometry: None,
         primitive: None,
+        ray: None,
     };
     pub fn info(i: usize) -> Self {
         Location {
@@ -42,15 +46,22 @@ impl Location {
             ..self
         }
     }
+    pub fn ray(self, r: u64) -> Self {
+        Location {
+            ray: Some(r),
+            ..self
+        }
+    }
 }
 
 impl fmt::Display for Location {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let mut sep = "";
         for (name, v) in [
-            ("info", self.info),
-            ("geometry", self.geometry),
-            ("primitive", self.primitive),
+            ("info", self.info.map(u64::from)),
+            ("geometry", self.geometry.map(u64::from)),
+            ("primitive", self.primitive.map(u64::from)),
+            ("ray", self.ray),
         ] {
             if let Some(v) = v {
                 write!(f, "{sep}{name} {v}")?;
@@ -124,6 +135,28 @@ impl Error {
             }
             _ => None,
         }
+    }
+
+    /// The error with ray `index` of a batch as its location's ray (validation and range
+    /// errors; others are returned as they are).
+    pub(crate) fn in_ray(mut self, index: usize) -> Self {
+        if let Error::Validation { location, .. } | Error::RangeTooShort { location, .. } =
+            &mut self
+        {
+            *location = location.ray(index as u64);
+        }
+        self
+    }
+
+    /// The error of ray `index` of a batch moved by `offset` (the batch was part of a larger
+    /// one starting there).
+    pub(crate) fn shift_ray(mut self, offset: usize) -> Self {
+        if let Error::Validation { location, .. } | Error::RangeTooShort { location, .. } =
+            &mut self
+        {
+            location.ray = location.ray.map(|r| r + offset as u64);
+        }
+        self
     }
 
     /// The `VkResult` a Vulkan command returns for this error.

@@ -2,7 +2,7 @@
 //! (`ray_query/ray_flags`), watertightness (closed grids and fans), ids with inactive
 //! instances and primitives, facing under geometry and instance mirrors, range ends, masks.
 
-use hostas::{Affine, Device, HitKind, Interleave, Ray, RayFlags, vk};
+use hostas::{Affine, Device, HitKind, Interleave, Location, Ray, RayFlags, vk};
 use hostas_testkit::generate;
 use hostas_testkit::{BlasDesc, GeometryDesc, InstanceDesc, SceneDesc};
 use rand::Rng;
@@ -884,7 +884,17 @@ fn closest_batch_reports_invalid_rays() {
         let err = tracer
             .closest_batch_with(&[good, bad, good], &mut hits, mode)
             .unwrap_err();
-        assert_eq!(err.to_string(), single.to_string());
+        assert_eq!(err.vuid_str(), single.vuid_str());
+        assert_eq!(err.location(), Some(Location::NONE.ray(1)), "{err}");
+        assert!(err.to_string().ends_with("(ray 1)"), "{err}");
+    }
+    // Across the chunks `trace_batch` splits a batch into, closest and any hit alike.
+    let mut rays = vec![good; 5000];
+    rays[3333] = bad;
+    for any_hit in [false, true] {
+        let err = scene.trace_batch(&rays, any_hit).unwrap_err();
+        assert_eq!(err.vuid_str(), single.vuid_str());
+        assert_eq!(err.location(), Some(Location::NONE.ray(3333)), "{err}");
     }
 }
 

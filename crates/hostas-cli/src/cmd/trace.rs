@@ -5,7 +5,7 @@ use crate::records::{self, HIT_SIZE};
 use crate::{input, note, progress};
 use anyhow::{Context, Result, anyhow};
 use clap::Args;
-use hostas::{Hit, vk};
+use hostas::vk;
 use rayon::prelude::*;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -68,14 +68,29 @@ pub fn run(a: TraceArgs) -> Result<()> {
         .map(|(c, chunk)| {
             let mut out = Vec::with_capacity(chunk.len() * HIT_SIZE);
             let mut tracer = scene.tracer();
-            for (k, ray) in chunk.iter().enumerate() {
-                let hit: Hit = if a.any_hit {
-                    tracer.any(ray)
-                } else {
-                    tracer.closest(ray)
-                }
-                .map_err(|e| anyhow!("{}: ray {}: {e}", a.rays.display(), c * CHUNK + k))?;
-                out.extend_from_slice(&records::encode_hit(&hit));
+            let mut hits = Vec::with_capacity(chunk.len());
+            // Closest hits as a batch, whose walks hostas interleaves where that pays.
+            let traced = if a.any_hit {
+                chunk.iter().enumerate().try_for_each(|(k, ray)| {
+                    hits.push(tracer.any(ray).map_err(|e| (k, e))?);
+                    Ok(())
+                })
+            } else {
+                tracer.closest_batch(chunk, &mut hits).map_err(|e| {
+                    let k = e.location().and_then(|l| l.ray).unwrap_or(0) as usize;
+                    (k, e)
+                })
+            };
+            traced.map_err(|(k, e)| {
+                // The rule alone: the error's own location counts rays within the chunk.
+                let rule = match &e {
+                    hostas::Error::Validation { vuid, message, .. } => format!("{vuid}: {message}"),
+                    e => e.to_string(),
+                };
+                anyhow!("{}: ray {}: {rule}", a.rays.display(), c * CHUNK + k)
+            })?;
+            for hit in &hits {
+                out.extend_from_slice(&records::encode_hit(hit));
             }
             pb.inc(chunk.len() as u64);
             Ok(out)

@@ -260,7 +260,8 @@ impl Scene {
     }
 
     /// Traces a batch of rays on all threads of the current rayon pool: closest hits, or any
-    /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order. Closest
+    /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order; an invalid
+    /// ray's error names its index in `rays` ([`Location::ray`](crate::Location::ray)). Closest
     /// hits go through [`Tracer::closest_batch`](super::Tracer::closest_batch) in chunks of
     /// [`TRACE_CHUNK`] rays (interleaved walks where they pay).
     pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
@@ -268,17 +269,24 @@ impl Scene {
         if any_hit {
             return rays
                 .par_iter()
+                .enumerate()
                 .with_min_len(256)
-                .map_init(|| self.tracer(), |t, r| t.any(r))
+                .map_init(
+                    || self.tracer(),
+                    |t, (i, r)| t.any(r).map_err(|e| e.in_ray(i)),
+                )
                 .collect();
         }
         let chunks: Vec<Vec<Hit>> = rays
             .par_chunks(TRACE_CHUNK)
+            .enumerate()
             .map_init(
                 || self.tracer(),
-                |t, chunk| {
+                |t, (k, chunk)| {
                     let mut hits = Vec::with_capacity(chunk.len());
-                    t.closest_batch(chunk, &mut hits).map(|()| hits)
+                    t.closest_batch(chunk, &mut hits)
+                        .map(|()| hits)
+                        .map_err(|e| e.shift_ray(k * TRACE_CHUNK))
                 },
             )
             .collect::<Result<_>>()?;

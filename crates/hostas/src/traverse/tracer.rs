@@ -14,7 +14,7 @@ use super::query::{
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::{ShearedRay, TriangleHit, by_permutation, permutation};
 use super::{Ray, RayFlags};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use crate::layout::triangles::{Indexed, TriangleSource, Triangles};
 use crate::layout::view::View;
 use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind};
@@ -214,7 +214,8 @@ impl<'s> Tracer<'s> {
     }
 
     /// Closest hits of `rays`, in order, into `hits` (replacing its contents): for each ray
-    /// the hit [`Tracer::closest`] gives it, bit for bit, or the first invalid ray's error.
+    /// the hit [`Tracer::closest`] gives it, bit for bit, or the first invalid ray's error,
+    /// with that ray's index in `rays` as its [`Location::ray`](crate::Location::ray).
     /// Rays that do not share an origin, through a large bottom level (16 MiB or more) that is
     /// the scene's only, identity instance, are walked several at once (see [`Interleave`]).
     pub fn closest_batch(&mut self, rays: &[Ray], hits: &mut Vec<Hit>) -> Result<()> {
@@ -228,16 +229,31 @@ impl<'s> Tracer<'s> {
         hits: &mut Vec<Hit>,
         interleave: Interleave,
     ) -> Result<()> {
-        hits.clear();
-        if rays.len() > MAX_BATCH {
-            // (Rays are numbered by `u32` below.)
-            let mut part = Vec::new();
-            for chunk in rays.chunks(MAX_BATCH) {
-                self.closest_batch_with(chunk, &mut part, interleave)?;
-                hits.append(&mut part);
-            }
-            return Ok(());
+        if rays.len() <= MAX_BATCH {
+            return self
+                .closest_chunk(rays, hits, interleave)
+                .map_err(|(i, e)| e.in_ray(i));
         }
+        // (Rays are numbered by `u32` in a chunk.)
+        hits.clear();
+        let mut part = Vec::new();
+        for (k, chunk) in rays.chunks(MAX_BATCH).enumerate() {
+            self.closest_chunk(chunk, &mut part, interleave)
+                .map_err(|(i, e)| e.in_ray(k * MAX_BATCH + i))?;
+            hits.append(&mut part);
+        }
+        Ok(())
+    }
+
+    /// [`Tracer::closest_batch_with`] for at most [`MAX_BATCH`] rays; an error comes with the
+    /// index of the ray it is about.
+    fn closest_chunk(
+        &mut self,
+        rays: &[Ray],
+        hits: &mut Vec<Hit>,
+        interleave: Interleave,
+    ) -> Result<(), (usize, Error)> {
+        hits.clear();
         let direct = self.direct.as_ref().filter(|d| {
             d.view.prim_kind == PrimKind::Triangles
                 && match interleave {
@@ -248,8 +264,8 @@ impl<'s> Tracer<'s> {
         });
         let Some(d) = direct else {
             hits.reserve(rays.len());
-            for r in rays {
-                hits.push(self.closest(r)?);
+            for (i, r) in rays.iter().enumerate() {
+                hits.push(self.closest(r).map_err(|e| (i, e))?);
             }
             return Ok(());
         };
@@ -263,8 +279,8 @@ impl<'s> Tracer<'s> {
         let mut classes = std::mem::take(&mut self.classes);
         classes.clear();
         let mut starts = [0usize; ONE_BY_ONE as usize + 2];
-        for r in rays {
-            r.validate()?;
+        for (i, r) in rays.iter().enumerate() {
+            r.validate().map_err(|e| (i, e))?;
             let inv = r.direction.map(|d| 1.0 / d);
             let c = if r.flags.0 & not_common != 0
                 || mask & r.cull_mask == 0
@@ -322,7 +338,7 @@ impl<'s> Tracer<'s> {
         for k in rest..order.len() {
             let i = order[k] as usize;
             if let (Some(r), Some(h)) = (rays.get(i), hits.get_mut(i)) {
-                *h = self.closest(r)?;
+                *h = self.closest(r).map_err(|e| (i, e))?;
             }
         }
         self.order = order;
