@@ -790,16 +790,18 @@ fn batch_tracing_matches_single_rays() {
     }
 }
 
-/// `Tracer::closest_batch` gives every ray the hit `Tracer::closest` gives it, bit for bit: on
+/// `Tracer::closest_batch` gives every ray the hit `Tracer::closest` gives it, and
+/// `Tracer::any_batch` the hit `Tracer::any` gives it, bit for bit: on
 /// single identity instances of random (and adversarial) triangles, where rays of the common
 /// case are walked several at once, and on scenes of many instances and AABBs, where every
 /// ray is traced on its own; with random flags (culling and first-hit rays take the one-ray
 /// path), cull masks, ranges and axis-aligned directions, for every build preset and for
 /// both leaf layouts, in batches of every size up to a few hundred.
 #[test]
-fn closest_batch_matches_closest() {
+fn tracer_batches_match_single_rays() {
     let mut r = generate::rng(0xba7c4);
     let mut hit_count = 0;
+    let mut first_not_closest = 0;
     for round in 0..24 {
         let adversarial = round % 2 == 1;
         let desc = if round % 4 == 3 {
@@ -853,10 +855,26 @@ fn closest_batch_matches_closest() {
                 );
                 hit_count += usize::from(hit.is_hit());
             }
+            // First hits: the one the one-ray walk accepts first, not any hit.
+            tracer.any_batch_with(rs, &mut batch, mode).unwrap();
+            assert_eq!(batch.len(), rs.len());
+            for (k, (ray, hit)) in rs.iter().zip(&batch).enumerate() {
+                let single = scene.trace_any(ray).unwrap();
+                assert_eq!(
+                    *hit, single,
+                    "any hit: round {round}, {mode:?}, batch of {len}, ray {k}: {ray:?}"
+                );
+                first_not_closest += usize::from(single != scene.trace_closest(ray).unwrap());
+            }
         }
     }
-    // The scenes must produce hits, not only misses.
+    // The scenes must produce hits, not only misses, and first hits that are not the closest
+    // (or the any-hit comparison would not tell the two walks apart).
     assert!(hit_count > 5000, "{hit_count} hits");
+    assert!(
+        first_not_closest > 500,
+        "{first_not_closest} first hits not closest"
+    );
 }
 
 /// A batch with an invalid ray reports that ray's error, as `Tracer::closest` would.

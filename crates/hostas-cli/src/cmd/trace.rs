@@ -69,19 +69,14 @@ pub fn run(a: TraceArgs) -> Result<()> {
             let mut out = Vec::with_capacity(chunk.len() * HIT_SIZE);
             let mut tracer = scene.tracer();
             let mut hits = Vec::with_capacity(chunk.len());
-            // Closest hits as a batch, whose walks hostas interleaves where that pays.
-            let traced = if a.any_hit {
-                chunk.iter().enumerate().try_for_each(|(k, ray)| {
-                    hits.push(tracer.any(ray).map_err(|e| (k, e))?);
-                    Ok(())
-                })
+            // A batch, whose walks hostas interleaves where that pays.
+            if a.any_hit {
+                tracer.any_batch(chunk, &mut hits)
             } else {
-                tracer.closest_batch(chunk, &mut hits).map_err(|e| {
-                    let k = e.location().and_then(|l| l.ray).unwrap_or(0) as usize;
-                    (k, e)
-                })
-            };
-            traced.map_err(|(k, e)| {
+                tracer.closest_batch(chunk, &mut hits)
+            }
+            .map_err(|e| {
+                let k = e.location().and_then(|l| l.ray).unwrap_or(0) as usize;
                 // The rule alone: the error's own location counts rays within the chunk.
                 let rule = match &e {
                     hostas::Error::Validation { vuid, message, .. } => format!("{vuid}: {message}"),

@@ -1,14 +1,16 @@
-//! Closest hits for many rays at once, their walks interleaved: one thread walks [`LANES`]
+//! Closest (or first) hits for many rays at once, their walks interleaved: one thread walks [`LANES`]
 //! rays in turn, one step (a node or a leaf) each, and requests the node or leaf each ray
 //! goes to next before it turns to the others. A single ray's walk is a chain of dependent
 //! loads (a node, then the child it picks); with several rays in flight the caches fetch one
 //! ray's next node while the others are worked on.
 //!
-//! Every ray gets the hit [`Tracer::closest`](super::Tracer::closest) gives it, bit for bit:
-//! the steps of each ray are those of the one-ray walk, in the same order (the root tested
-//! by the same general test, the children ordered by the same distances). Only rays of the
-//! common case go this way (one identity instance of triangles, no culling, a direction with
-//! a finite inverse, closest hit); the caller traces the others one at a time.
+//! Every ray gets the hit [`Tracer::closest`](super::Tracer::closest) (or, with `FIRST`,
+//! [`Tracer::any`](super::Tracer::any)) gives it, bit for bit: the steps of each ray are those
+//! of the one-ray walk, in the same order (the root tested by the same general test, the
+//! children ordered by the same distances), and with `FIRST` a ray's walk ends at its first
+//! accepted hit, as the one-ray walk's does. Only rays of the common case go this way (one
+//! identity instance of triangles, no culling, a direction with a finite inverse); the caller
+//! traces the others one at a time.
 
 use super::Ray;
 use super::query::{ANY_AXES, BoxRay, Entry, descend, warm};
@@ -39,11 +41,11 @@ struct Lane {
 
 /// Walks the rays `order` (indices into `rays`, every one with permutation `P` and a finite
 /// inverse) through the bottom level `view` of instance `inst`, triangles `tris`, [`LANES`]
-/// at a time, and writes each ray's hit to `hits` (as long as `rays`). `flip`: the instance
-/// flips facing.
+/// at a time, and writes each ray's hit to `hits` (as long as `rays`): the closest, or with
+/// `FIRST` the first accepted. `flip`: the instance flips facing.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
-pub(super) fn closest<const P: usize, T: LeafTriangles>(
+pub(super) fn walk<const P: usize, T: LeafTriangles, const FIRST: bool>(
     view: &View,
     inst: &InstanceRecord,
     tris: T,
@@ -73,7 +75,7 @@ pub(super) fn closest<const P: usize, T: LeafTriangles>(
     }
     while live != 0 {
         for (k, (lane, stack)) in lanes.iter_mut().zip(stacks.iter_mut()).enumerate() {
-            if live & 1 << k == 0 || !step::<P, T>(view, tris, flip, lane, stack) {
+            if live & 1 << k == 0 || !step::<P, T, FIRST>(view, tris, flip, lane, stack) {
                 continue;
             }
             if let Some(h) = hits.get_mut(lane.ray) {
@@ -134,9 +136,10 @@ fn start<const P: usize, T: LeafTriangles>(
 }
 
 /// One step of `lane`'s walk: its current node (then the child it goes to is requested) or
-/// leaf, then the next entry. Returns whether the walk is over.
+/// leaf, then the next entry. Returns whether the walk is over (with `FIRST`, also when the
+/// leaf gave a hit).
 #[inline(always)]
-fn step<const P: usize, T: LeafTriangles>(
+fn step<const P: usize, T: LeafTriangles, const FIRST: bool>(
     view: &View,
     tris: T,
     flip: bool,
@@ -159,8 +162,8 @@ fn step<const P: usize, T: LeafTriangles>(
             lane.cur = next;
             return false;
         }
-    } else {
-        leaf::<P, T>(tris, flip, lane, cur);
+    } else if leaf::<P, T, FIRST>(tris, flip, lane, cur) && FIRST {
+        return true;
     }
     match pop(stack, &mut lane.sp, lane.best.t) {
         Some(e) => {
@@ -171,29 +174,42 @@ fn step<const P: usize, T: LeafTriangles>(
     }
 }
 
-/// The triangles of leaf `cur` tested as the one-ray walk tests them (no culling).
+/// The triangles of leaf `cur` tested as the one-ray walk tests them (no culling); with
+/// `FIRST`, up to the first accepted. Returns whether one was accepted.
 #[inline(always)]
-fn leaf<const P: usize, T: LeafTriangles>(tris: T, flip: bool, lane: &mut Lane, cur: Entry) {
+fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool>(
+    tris: T,
+    flip: bool,
+    lane: &mut Lane,
+    cur: Entry,
+) -> bool {
     let first = cur.child & !LEAF_BIT;
     let best = &mut lane.best;
     if T::NEAREST_FROM != u32::MAX && cur.count >= T::NEAREST_FROM {
-        if let Some((k, h)) = tris.nearest::<P, false>(
+        let Some((k, h)) = tris.nearest::<P, FIRST>(
             &lane.sheared,
             first as usize,
             cur.count as usize,
             lane.t_min,
             best.t,
-        ) {
-            best.accept_triangle(first + k, &h, h.front_face != flip);
-        }
-        return;
+        ) else {
+            return false;
+        };
+        best.accept_triangle(first + k, &h, h.front_face != flip);
+        return true;
     }
+    let mut found = false;
     for (p, tri) in (first..).zip(tris.leaf(first as usize, cur.count as usize)) {
         let Some(h) = T::intersect::<P>(&lane.sheared, tri.borrow()) else {
             continue;
         };
         if h.t > lane.t_min && h.t < best.t {
             best.accept_triangle(p, &h, h.front_face != flip);
+            found = true;
+            if FIRST {
+                break;
+            }
         }
     }
+    found
 }

@@ -261,22 +261,12 @@ impl Scene {
 
     /// Traces a batch of rays on all threads of the current rayon pool: closest hits, or any
     /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order; an invalid
-    /// ray's error names its index in `rays` ([`Location::ray`](crate::Location::ray)). Closest
-    /// hits go through [`Tracer::closest_batch`](super::Tracer::closest_batch) in chunks of
-    /// [`TRACE_CHUNK`] rays (interleaved walks where they pay).
+    /// ray's error names its index in `rays` ([`Location::ray`](crate::Location::ray)). The
+    /// rays go through [`Tracer::closest_batch`](super::Tracer::closest_batch) or
+    /// [`Tracer::any_batch`](super::Tracer::any_batch) in chunks of [`TRACE_CHUNK`] rays
+    /// (interleaved walks where they pay).
     pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
         use rayon::prelude::*;
-        if any_hit {
-            return rays
-                .par_iter()
-                .enumerate()
-                .with_min_len(256)
-                .map_init(
-                    || self.tracer(),
-                    |t, (i, r)| t.any(r).map_err(|e| e.in_ray(i)),
-                )
-                .collect();
-        }
         let chunks: Vec<Vec<Hit>> = rays
             .par_chunks(TRACE_CHUNK)
             .enumerate()
@@ -284,9 +274,13 @@ impl Scene {
                 || self.tracer(),
                 |t, (k, chunk)| {
                     let mut hits = Vec::with_capacity(chunk.len());
-                    t.closest_batch(chunk, &mut hits)
-                        .map(|()| hits)
-                        .map_err(|e| e.shift_ray(k * TRACE_CHUNK))
+                    if any_hit {
+                        t.any_batch(chunk, &mut hits)
+                    } else {
+                        t.closest_batch(chunk, &mut hits)
+                    }
+                    .map(|()| hits)
+                    .map_err(|e| e.shift_ray(k * TRACE_CHUNK))
                 },
             )
             .collect::<Result<_>>()?;
@@ -294,7 +288,7 @@ impl Scene {
     }
 }
 
-/// Rays per [`Tracer::closest_batch`](super::Tracer::closest_batch) call in
+/// Rays per [`Tracer::closest_batch`](super::Tracer::closest_batch) or `any_batch` call in
 /// [`Scene::trace_batch`]: enough for each axis permutation's share to keep eight walks in
 /// flight most of the time, few enough for a thread's share of work to balance.
 const TRACE_CHUNK: usize = 1024;

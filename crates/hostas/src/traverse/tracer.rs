@@ -229,25 +229,61 @@ impl<'s> Tracer<'s> {
         hits: &mut Vec<Hit>,
         interleave: Interleave,
     ) -> Result<()> {
+        self.batch::<false>(rays, hits, interleave)
+    }
+
+    /// First accepted hits of `rays` (every ray traced as with `TerminateOnFirstHit`, as
+    /// shadow rays are), in order, into `hits`: for each ray the hit [`Tracer::any`] gives
+    /// it, bit for bit; otherwise as [`Tracer::closest_batch`].
+    pub fn any_batch(&mut self, rays: &[Ray], hits: &mut Vec<Hit>) -> Result<()> {
+        self.any_batch_with(rays, hits, Interleave::Auto)
+    }
+
+    /// [`Tracer::any_batch`], choosing how the rays are walked.
+    pub fn any_batch_with(
+        &mut self,
+        rays: &[Ray],
+        hits: &mut Vec<Hit>,
+        interleave: Interleave,
+    ) -> Result<()> {
+        self.batch::<true>(rays, hits, interleave)
+    }
+
+    /// Closest hits, or with `FIRST` first accepted hits, of `rays` into `hits`.
+    fn batch<const FIRST: bool>(
+        &mut self,
+        rays: &[Ray],
+        hits: &mut Vec<Hit>,
+        interleave: Interleave,
+    ) -> Result<()> {
         if rays.len() <= MAX_BATCH {
             return self
-                .closest_chunk(rays, hits, interleave)
+                .chunk::<FIRST>(rays, hits, interleave)
                 .map_err(|(i, e)| e.in_ray(i));
         }
         // (Rays are numbered by `u32` in a chunk.)
         hits.clear();
         let mut part = Vec::new();
         for (k, chunk) in rays.chunks(MAX_BATCH).enumerate() {
-            self.closest_chunk(chunk, &mut part, interleave)
+            self.chunk::<FIRST>(chunk, &mut part, interleave)
                 .map_err(|(i, e)| e.in_ray(k * MAX_BATCH + i))?;
             hits.append(&mut part);
         }
         Ok(())
     }
 
-    /// [`Tracer::closest_batch_with`] for at most [`MAX_BATCH`] rays; an error comes with the
-    /// index of the ray it is about.
-    fn closest_chunk(
+    /// One ray traced on its own, for [`Tracer::batch`].
+    fn one<const FIRST: bool>(&mut self, ray: &Ray) -> Result<Hit> {
+        if FIRST {
+            self.any(ray)
+        } else {
+            self.closest(ray)
+        }
+    }
+
+    /// [`Tracer::batch`] for at most [`MAX_BATCH`] rays; an error comes with the index of the
+    /// ray it is about.
+    fn chunk<const FIRST: bool>(
         &mut self,
         rays: &[Ray],
         hits: &mut Vec<Hit>,
@@ -265,7 +301,7 @@ impl<'s> Tracer<'s> {
         let Some(d) = direct else {
             hits.reserve(rays.len());
             for (i, r) in rays.iter().enumerate() {
-                hits.push(self.closest(r).map_err(|e| (i, e))?);
+                hits.push(self.one::<FIRST>(r).map_err(|e| (i, e))?);
             }
             return Ok(());
         };
@@ -275,7 +311,14 @@ impl<'s> Tracer<'s> {
         let (mask, skip) = (d.mask, d.skip);
         // Rays by class (a permutation, or `ONE_BY_ONE`), in order within each: a counting sort.
         const ONE_BY_ONE: u8 = 6;
-        let not_common = CULLING.0 | RayFlags::TERMINATE_ON_FIRST_HIT.0 | skip;
+        // (In a batch of closest hits, a ray with `TerminateOnFirstHit` goes one at a time,
+        // through `Tracer::closest`, which honours the flag.)
+        let first_hit = if FIRST {
+            0
+        } else {
+            RayFlags::TERMINATE_ON_FIRST_HIT.0
+        };
+        let not_common = CULLING.0 | first_hit | skip;
         let mut classes = std::mem::take(&mut self.classes);
         classes.clear();
         let mut starts = [0usize; ONE_BY_ONE as usize + 2];
@@ -323,10 +366,10 @@ impl<'s> Tracer<'s> {
                     continue;
                 }
                 by_permutation!(perm, P => match view.triangles {
-                    Triangles::Direct(t) => interleaved::closest::<P, _>(
+                    Triangles::Direct(t) => interleaved::walk::<P, _, FIRST>(
                         &view, inst, t, flip, rays, group, lanes, hits,
                     ),
-                    Triangles::Indexed(t) => interleaved::closest::<P, _>(
+                    Triangles::Indexed(t) => interleaved::walk::<P, _, FIRST>(
                         &view, inst, t, flip, rays, group, lanes, hits,
                     ),
                 });
@@ -338,7 +381,7 @@ impl<'s> Tracer<'s> {
         for k in rest..order.len() {
             let i = order[k] as usize;
             if let (Some(r), Some(h)) = (rays.get(i), hits.get_mut(i)) {
-                *h = self.closest(r).map_err(|e| (i, e))?;
+                *h = self.one::<FIRST>(r).map_err(|e| (i, e))?;
             }
         }
         self.order = order;
