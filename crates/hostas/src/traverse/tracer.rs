@@ -327,11 +327,11 @@ impl<'s> Tracer<'s> {
         let Some(d) = direct else {
             hits.reserve(rays.len());
             if let (Some(d), true) = (&self.direct, rays.len() >= LOCAL_STACK_FROM) {
-                // The walk's stack on this thread's stack, a fixed distance from the walk's own
-                // spilled values, rather than on the heap: how far apart the two are modulo 4 KiB
-                // moved the meshes' primary rays by up to 20% from process to process (a
-                // store and a later load 4 KiB apart are taken as overlapping), and here the
-                // faster placement is the usual one (see `LOCAL_STACK_FROM`).
+                // The walk's stack on this thread's stack, a short fixed distance from the
+                // walk's own spilled values, rather than on the heap: how far apart the two lay
+                // modulo 4 KiB moved the meshes' primary rays by up to 20% from process to
+                // process (most likely 4 KiB aliasing, a load taken as overlapping a pending
+                // store to an address 4 KiB away; see `LOCAL_STACK_FROM`).
                 let mut stack = [Entry::default(); STACK_CAPACITY];
                 for (i, r) in rays.iter().enumerate() {
                     r.validate().map_err(|e| (i, e))?;
