@@ -7,7 +7,8 @@
 //!
 //! `cargo run --release --example batches -- [TRIANGLES] [ROUNDS]` (default 1,000,000 and 5):
 //! a soup (random triangles, centres in [0, 100]^3, vertices within 1 of them, as the peer
-//! benchmark's) and a UV sphere of about as many (4n² for n = √(TRIANGLES / 4)). Build with `-C target-cpu=native`.
+//! benchmark's) and a UV sphere of about as many (4n² for n = √(TRIANGLES / 4)). Build with
+//! `-C target-cpu=native`.
 
 use hostas::{Device, Hit, Interleave, Ray, Tracer, vk};
 use rand::{Rng, SeedableRng};

@@ -1,6 +1,6 @@
-//! Closest (or first) hits for many rays at once, their walks interleaved: one thread walks [`LANES`]
-//! rays in turn, one step (a node or a leaf) each, and requests the node or leaf each ray
-//! goes to next before it turns to the others. A single ray's walk is a chain of dependent
+//! Closest (or first) hits for many rays at once, their walks interleaved: one thread walks
+//! [`LANES`] rays in turn, one step (a node or a leaf) each, and requests the node or leaf
+//! each ray goes to next before it turns to the others. A single ray's walk is a chain of dependent
 //! loads (a node, then the child it picks); with several rays in flight the caches fetch one
 //! ray's next node while the others are worked on.
 //!

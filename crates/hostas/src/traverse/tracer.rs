@@ -93,9 +93,7 @@ impl<'s> Direct<'s> {
                 && view.header.used_size >= INTERLEAVE_FROM_BYTES,
         })
     }
-}
 
-impl Direct<'_> {
     /// A valid ray's hit, walked on `stack`.
     #[inline(always)]
     fn trace(&self, stack: &mut BlasStack, ray: &Ray, first_hit: bool) -> Hit {
@@ -142,11 +140,12 @@ pub enum Interleave {
 
 /// From this many rays, a batch traced one ray at a time through a [`Direct`] bottom level
 /// walks them on a stack of its own, made (and zeroed, 7 KiB) per batch on the thread's
-/// stack. Measured on the lent Xeon with address-space randomization off and the process's
-/// stack moved by 0 to 3,840 bytes (`docs/results/s27/`): the paired primary rays against
-/// Embree MEDIUM read 1.145 (the conference) and 1.195 (Sponza) over the sixteen
-/// placements with the heap stack (0.94 and 0.90 at the worst), 1.247 and 1.263 with this
-/// one (1.01 and 1.05).
+/// stack; shorter batches use the tracer's, not to pay the zeroing for a ray or two (the
+/// threshold is not tuned). Measured on the lent Xeon with address-space randomization off
+/// and the process's stack moved by 0 to 3,840 bytes (`docs/results/s27/`): the paired
+/// primary rays against Embree MEDIUM read 1.145 (the conference) and 1.195 (Sponza) over the
+/// sixteen placements with the heap stack (0.94 and 0.90 at the worst), 1.247 and 1.263 with
+/// this one (1.01 and 1.05).
 const LOCAL_STACK_FROM: usize = 16;
 
 /// The most rays [`Tracer::closest_batch_with`] orders at once (longer batches are split).
