@@ -75,14 +75,14 @@ pub fn run(a: TraceArgs) -> Result<()> {
             } else {
                 tracer.closest_batch(chunk, &mut hits)
             }
-            .map_err(|e| {
-                let k = e.location().and_then(|l| l.ray).unwrap_or(0) as usize;
+            .map_err(|e| match (&e, e.location().and_then(|l| l.ray)) {
                 // The rule alone: the error's own location counts rays within the chunk.
-                let rule = match &e {
-                    hostas::Error::Validation { vuid, message, .. } => format!("{vuid}: {message}"),
-                    e => e.to_string(),
-                };
-                anyhow!("{}: ray {}: {rule}", a.rays.display(), c * CHUNK + k)
+                (hostas::Error::Validation { vuid, message, .. }, Some(k)) => anyhow!(
+                    "{}: ray {}: {vuid}: {message}",
+                    a.rays.display(),
+                    c * CHUNK + k as usize
+                ),
+                _ => anyhow!("{}: {e}", a.rays.display()),
             })?;
             for hit in &hits {
                 out.extend_from_slice(&records::encode_hit(hit));

@@ -14,7 +14,7 @@ use super::query::{
 use super::scene::{Hit, HitKind, Scene};
 use super::triangle::{ShearedRay, TriangleHit, by_permutation, permutation};
 use super::{Ray, RayFlags};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::layout::triangles::{Indexed, TriangleSource, Triangles};
 use crate::layout::view::View;
 use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind};
@@ -282,16 +282,14 @@ impl<'s> Tracer<'s> {
         interleave: Interleave,
     ) -> Result<()> {
         if rays.len() <= MAX_BATCH {
-            return self
-                .chunk::<FIRST>(rays, hits, interleave)
-                .map_err(|(i, e)| e.in_ray(i));
+            return self.chunk::<FIRST>(rays, hits, interleave);
         }
         // (Rays are numbered by `u32` in a chunk.)
         hits.clear();
         let mut part = Vec::new();
         for (k, chunk) in rays.chunks(MAX_BATCH).enumerate() {
             self.chunk::<FIRST>(chunk, &mut part, interleave)
-                .map_err(|(i, e)| e.in_ray(k * MAX_BATCH + i))?;
+                .map_err(|e| e.shift_ray(k * MAX_BATCH))?;
             hits.append(&mut part);
         }
         Ok(())
@@ -306,14 +304,13 @@ impl<'s> Tracer<'s> {
         }
     }
 
-    /// [`Tracer::batch`] for at most [`MAX_BATCH`] rays; an error comes with the index of the
-    /// ray it is about.
+    /// [`Tracer::batch`] for at most [`MAX_BATCH`] rays.
     fn chunk<const FIRST: bool>(
         &mut self,
         rays: &[Ray],
         hits: &mut Vec<Hit>,
         interleave: Interleave,
-    ) -> Result<(), (usize, Error)> {
+    ) -> Result<()> {
         hits.clear();
         let direct = self.direct.as_ref().filter(|d| {
             d.view.prim_kind == PrimKind::Triangles
@@ -333,14 +330,14 @@ impl<'s> Tracer<'s> {
                 // store to an address 4 KiB away; see `LOCAL_STACK_FROM`).
                 let mut stack = [Entry::default(); STACK_CAPACITY];
                 for (i, r) in rays.iter().enumerate() {
-                    r.validate().map_err(|e| (i, e))?;
+                    r.validate().map_err(|e| e.in_ray(i))?;
                     let first_hit = FIRST || r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
                     hits.push(d.trace(&mut stack, r, first_hit));
                 }
                 return Ok(());
             }
             for (i, r) in rays.iter().enumerate() {
-                hits.push(self.one::<FIRST>(r).map_err(|e| (i, e))?);
+                hits.push(self.one::<FIRST>(r).map_err(|e| e.in_ray(i))?);
             }
             return Ok(());
         };
@@ -362,7 +359,7 @@ impl<'s> Tracer<'s> {
         classes.clear();
         let mut starts = [0usize; ONE_BY_ONE as usize + 2];
         for (i, r) in rays.iter().enumerate() {
-            r.validate().map_err(|e| (i, e))?;
+            r.validate().map_err(|e| e.in_ray(i))?;
             let inv = r.direction.map(|d| 1.0 / d);
             let c = if r.flags.0 & not_common != 0
                 || mask & r.cull_mask == 0
@@ -420,7 +417,7 @@ impl<'s> Tracer<'s> {
         for k in rest..order.len() {
             let i = order[k] as usize;
             if let (Some(r), Some(h)) = (rays.get(i), hits.get_mut(i)) {
-                *h = self.one::<FIRST>(r).map_err(|e| (i, e))?;
+                *h = self.one::<FIRST>(r).map_err(|e| e.in_ray(i))?;
             }
         }
         self.order = order;
@@ -440,13 +437,11 @@ impl<'s> Tracer<'s> {
 
     fn trace(&mut self, ray: &Ray, first_hit: bool) -> Result<Hit> {
         ray.validate()?;
-        let mut best = Best::miss(ray.t_max);
         if let Some(d) = &self.direct {
-            if let Some(stack) = self.stack.first_chunk_mut() {
-                return Ok(d.trace(stack, ray, first_hit));
-            }
-            return Ok(hit(&best, d.inst, Some(&d.view)));
+            let stack = self.stack.first_chunk_mut();
+            return Ok(stack.map_or(Hit::MISS, |s| d.trace(s, ray, first_hit)));
         }
+        let mut best = Best::miss(ray.t_max);
         let Some(tlas) = self.tlas else {
             return Ok(Hit::MISS);
         };
