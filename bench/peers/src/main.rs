@@ -89,6 +89,10 @@ struct Args {
     /// Image width of the primary rays: W x W primary rays and as many incoherent rays.
     #[arg(long, default_value_t = 256)]
     rays: usize,
+    /// Ray kinds to trace, comma separated (the others are left out of every phase: a
+    /// profile of one kind, e.g. under callgrind).
+    #[arg(long, value_enum, value_delimiter = ',', default_values_t = rays::Kind::ALL)]
+    kinds: Vec<rays::Kind>,
     /// Timed trace passes per ray kind (median), after one untimed pass that records hits.
     #[arg(long, default_value_t = 3)]
     passes: usize,
@@ -287,7 +291,8 @@ fn main() {
         }
         let load_start = util::loadavg();
         let load_s = t_scene.elapsed().as_secs_f64();
-        let rays = rays::generate(&sc, args.rays);
+        let mut rays = rays::generate(&sc, args.rays);
+        rays.keep(&args.kinds);
         eprintln!(
             "[{:6.1}s] scene {} ({} tris, loaded in {:.1}s)",
             started.elapsed().as_secs_f64(),

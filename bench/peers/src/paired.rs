@@ -189,6 +189,7 @@ fn trace_targets<'a>(
 ) -> [Ratio; 2] {
     [(primary, Kind::Primary), (incoherent, Kind::Incoherent)].map(|(target, kind)| {
         let pairs = match &mut sides {
+            _ if rays.get(kind).is_empty() => Err("left out by --kinds".to_string()),
             Ok((h, e)) => traces(cfg, &mut **h, &mut **e, rays.get(kind)),
             Err(why) => Err(why.clone()),
         };

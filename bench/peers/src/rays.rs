@@ -30,7 +30,7 @@ impl Hit {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Kind {
     Primary,
     Incoherent,
@@ -46,6 +46,17 @@ pub struct RaySet {
 }
 
 impl RaySet {
+    /// Drops the rays of every kind not in `kinds`: phases then skip those kinds.
+    pub fn keep(&mut self, kinds: &[Kind]) {
+        for k in Kind::ALL {
+            if !kinds.contains(&k) {
+                match k {
+                    Kind::Primary => self.primary.clear(),
+                    Kind::Incoherent => self.incoherent.clear(),
+                }
+            }
+        }
+    }
     pub fn get(&self, k: Kind) -> &[Ray] {
         match k {
             Kind::Primary => &self.primary,

@@ -175,14 +175,16 @@ impl SceneReport {
     pub fn finish(&mut self) {
         // Reference for the hit cross-check: hostas default preset, else Embree MEDIUM, else
         // the first row with hits.
+        // (Hits of either kind: `--kinds` may leave one out.)
+        let traced = |r: &Row| r.hits.iter().any(Option::is_some);
         let pick = |lib: &str, key: &str| {
             self.rows
                 .iter()
-                .position(|r| r.library == lib && r.key == key && r.hits[0].is_some())
+                .position(|r| r.library == lib && r.key == key && traced(r))
         };
         self.reference = pick("hostas", "default")
             .or_else(|| pick("embree", "MEDIUM"))
-            .or_else(|| self.rows.iter().position(|r| r.hits[0].is_some()));
+            .or_else(|| self.rows.iter().position(traced));
         if let (Some(ri), Ok(_)) = (self.reference, std::env::var("PEERS_DEBUG_MISMATCH")) {
             for r in &self.rows {
                 for k in 0..2 {

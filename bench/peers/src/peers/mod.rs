@@ -32,14 +32,14 @@ pub fn trace_kind(
     (median(&mut v), hits)
 }
 
-/// Traces both ray kinds into `row`.
+/// Traces both ray kinds into `row` (a kind without rays, left out by `--kinds`, is skipped).
 pub fn trace_all(
     row: &mut Row,
     rays: &RaySet,
     passes: usize,
     mut f: impl FnMut(&[Ray], &mut [Hit]),
 ) {
-    for kind in Kind::ALL {
+    for kind in Kind::ALL.into_iter().filter(|&k| !rays.get(k).is_empty()) {
         let (ms, hits) = trace_kind(passes, rays.get(kind), &mut f);
         row.set_trace(kind, ms, hits);
     }
