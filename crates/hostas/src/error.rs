@@ -137,13 +137,21 @@ impl Error {
         }
     }
 
+    /// [`Error::location`], to amend.
+    fn location_mut(&mut self) -> Option<&mut Location> {
+        match self {
+            Error::Validation { location, .. } | Error::RangeTooShort { location, .. } => {
+                Some(location)
+            }
+            _ => None,
+        }
+    }
+
     /// The error with ray `index` of a batch as its location's ray (validation and range
     /// errors; others are returned as they are).
     pub(crate) fn in_ray(mut self, index: usize) -> Self {
-        if let Error::Validation { location, .. } | Error::RangeTooShort { location, .. } =
-            &mut self
-        {
-            *location = location.ray(index as u64);
+        if let Some(location) = self.location_mut() {
+            location.ray = Some(index as u64);
         }
         self
     }
@@ -151,9 +159,7 @@ impl Error {
     /// The error of ray `index` of a batch moved by `offset` (the batch was part of a larger
     /// one starting there).
     pub(crate) fn shift_ray(mut self, offset: usize) -> Self {
-        if let Error::Validation { location, .. } | Error::RangeTooShort { location, .. } =
-            &mut self
-        {
+        if let Some(location) = self.location_mut() {
             location.ray = location.ray.map(|r| r + offset as u64);
         }
         self
