@@ -840,10 +840,10 @@ fn tracer_batches_match_single_rays() {
         for (j, len) in [1, 2, 7, 8, 9, 64, 255, 354].into_iter().enumerate() {
             let rs = &rays[at..at + len];
             at += len;
-            let mode = if j % 3 == 0 {
-                modes[round % 3]
-            } else {
-                Interleave::Always
+            let mode = match j % 3 {
+                0 => modes[round % 3],
+                1 => Interleave::Packets,
+                _ => Interleave::Always,
             };
             tracer.closest_batch_with(rs, &mut batch, mode).unwrap();
             assert_eq!(batch.len(), rs.len());
@@ -877,6 +877,106 @@ fn tracer_batches_match_single_rays() {
     );
 }
 
+/// Coherent rays (a camera's, in scanline order, and packets gathered around triangles'
+/// vertices, where the triangles that share one may tie) walked in packets
+/// (`Interleave::Packets`) get the hit `Tracer::closest` gives each, bit for bit: over random
+/// and adversarial triangles, and over two and three copies of one grid (indexed), where every
+/// hit ties with its copies. A packet visits nodes in another order than one ray alone, so
+/// this rests on the packet noting the rays that meet a tie and tracing them again alone.
+/// Every preset; whole images and odd-sized batches.
+#[test]
+fn packets_match_single_rays() {
+    let mut r = generate::rng(0x9ac4e7);
+    let mut hit_count = 0;
+    let mut tied = 0;
+    for round in 0..12 {
+        let (desc, origin, corner, span) = if round % 3 == 2 {
+            let copies = 2 + round % 2;
+            let desc = SceneDesc {
+                blases: vec![BlasDesc {
+                    geometries: (0..copies).map(|_| generate::grid(12, None)).collect(),
+                }],
+                instances: vec![InstanceDesc::identity(0)],
+            };
+            // Above the grid: every other ray meets a vertex or an edge exactly.
+            (desc, [6.0, 6.0, 10.0], [0.0, 0.0, 0.0], 12.0)
+        } else {
+            let tris = generate::random_triangles(&mut r, 400 + 100 * round, round % 2 == 1);
+            let desc = SceneDesc {
+                blases: vec![BlasDesc {
+                    geometries: vec![tris],
+                }],
+                instances: vec![InstanceDesc::identity(0)],
+            };
+            let o = [r.gen_range(-3.0..3.0), r.gen_range(-3.0..3.0), 40.0];
+            (desc, o, [-15.0, -15.0, 0.0], 30.0)
+        };
+        let preset = PRESETS[round % PRESETS.len()];
+        let device = Device::new();
+        let built = desc.build(&device, preset, preset).unwrap();
+        let scene = device.scene(built.tlas).unwrap();
+        // A 48 x 48 image, its pixels' centres on the plane z = corner[2].
+        let w = 48;
+        let rays: Vec<Ray> = (0..w * w)
+            .map(|k| {
+                let (x, y) = ((k % w) as f32, (k / w) as f32);
+                let at = [
+                    corner[0] + span * x / (w - 1) as f32,
+                    corner[1] + span * y / (w - 1) as f32,
+                    corner[2],
+                ];
+                Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
+            })
+            .chain(vertex_clusters(&mut r, &desc, origin))
+            .collect();
+        let mut tracer = scene.tracer();
+        let mut batch = Vec::new();
+        for (mode, len) in [
+            (Interleave::Packets, rays.len()),
+            (Interleave::Auto, rays.len()),
+            (Interleave::Packets, 13),
+        ] {
+            for rs in rays.chunks(len) {
+                tracer.closest_batch_with(rs, &mut batch, mode).unwrap();
+                assert_eq!(batch.len(), rs.len());
+                for (k, (ray, hit)) in rs.iter().zip(&batch).enumerate() {
+                    let single = scene.trace_closest(ray).unwrap();
+                    assert_eq!(
+                        *hit, single,
+                        "round {round}, {mode:?}, batch of {len}, ray {k}: {ray:?}"
+                    );
+                    hit_count += usize::from(hit.is_hit());
+                    tied += usize::from(hit.is_hit() && hit.t == 1.0 && round % 3 == 2);
+                }
+            }
+        }
+    }
+    assert!(hit_count > 20_000, "{hit_count} hits");
+    // (The grids' rays all end at t = 1: every one ties with its copies.)
+    assert!(tied > 10_000, "{tied} tied hits");
+}
+
+/// Packets of rays from `origin`: per packet, one ray exactly through a vertex of a random
+/// triangle of `desc`'s first geometry (where the triangles sharing it tie) and seven close
+/// to it, so that the packet holds together down to the vertex's leaves.
+fn vertex_clusters(r: &mut generate::Rand, desc: &SceneDesc, origin: [f32; 3]) -> Vec<Ray> {
+    let g = &desc.blases[0].geometries[0];
+    let mut rays = Vec::new();
+    for _ in 0..256 {
+        let Some(tri) = g.triangle(r.gen_range(0..g.primitive_count())) else {
+            continue;
+        };
+        let v = tri[r.gen_range(0..3)];
+        // Seven around the vertex, then the vertex itself.
+        for k in 0..8 {
+            let (a, d) = (k as f32 * 0.9, if k == 7 { 0.0 } else { 0.05 });
+            let at = [v[0] + d * a.cos(), v[1] + d * a.sin(), v[2]];
+            rays.push(Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i])));
+        }
+    }
+    rays
+}
+
 /// A batch with an invalid ray reports that ray's error, as `Tracer::closest` would.
 #[test]
 fn closest_batch_reports_invalid_rays() {
@@ -894,7 +994,13 @@ fn closest_batch_reports_invalid_rays() {
     let mut hits = Vec::new();
     let mut tracer = scene.tracer();
     let single = scene.trace_closest(&bad).unwrap_err();
-    for mode in [Interleave::Always, Interleave::Auto, Interleave::Never] {
+    let modes = [
+        Interleave::Always,
+        Interleave::Auto,
+        Interleave::Never,
+        Interleave::Packets,
+    ];
+    for mode in modes {
         tracer
             .closest_batch_with(&[good, good], &mut hits, mode)
             .unwrap();

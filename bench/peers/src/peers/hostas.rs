@@ -130,12 +130,14 @@ fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
     }
 }
 
-/// How hostas walks each batch: `HOSTAS_INTERLEAVE=always` or `never` overrides hostas's own
-/// choice (`auto`), to measure the interleaved walk against one ray at a time.
+/// How hostas walks each batch: `HOSTAS_INTERLEAVE=always`, `never` or `packets` overrides
+/// hostas's own choice (`auto`), to measure the interleaved or packet walk against one ray at
+/// a time.
 fn interleave_mode() -> hostas::Interleave {
     match std::env::var("HOSTAS_INTERLEAVE").as_deref() {
         Ok("always") => hostas::Interleave::Always,
         Ok("never") => hostas::Interleave::Never,
+        Ok("packets") => hostas::Interleave::Packets,
         _ => hostas::Interleave::Auto,
     }
 }

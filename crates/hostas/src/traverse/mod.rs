@@ -6,6 +6,7 @@
 //! batch calls for closest-hit and any-hit tracing.
 
 mod interleaved;
+mod packet;
 mod query;
 mod scene;
 mod tracer;

@@ -592,6 +592,21 @@ fn ranks(t: &[f32; WIDTH], mask: u32) -> [u32; WIDTH] {
     bytemuck::cast(rank)
 }
 
+/// The lanes of `mask` in the order [`descend`] visits them (nearest first by `t`, a later
+/// lane first on a tie); entries past the mask's count are 0.
+#[inline(always)]
+pub(super) fn nearest_first(t: &[f32; WIDTH], mask: u32) -> [u32; WIDTH] {
+    let rank = ranks(t, mask);
+    let mut order = [0; WIDTH];
+    let mut m = mask;
+    while m != 0 {
+        let k = m.trailing_zeros();
+        m &= m - 1;
+        order[rank[k as usize & 7] as usize & 7] = k;
+    }
+    order
+}
+
 /// Requests a pushed child now, so that its misses overlap the rest of the walk: an inner
 /// node's four lines, or a leaf's first lines ([`TriangleSource::prefetch`]).
 #[inline(always)]

@@ -1,0 +1,397 @@
+//! Closest hits for coherent rays (a camera's primary rays), [`PACKET`] at a time: one walk
+//! over the nodes any of them reaches. Each node's eight children are tested against every
+//! ray of the packet that reached the node (each ray's own test, as the one-ray walk does it),
+//! and the children any ray reaches are ordered and pushed once for all, each with the set of
+//! rays that reach it. A leaf is tested by each of its rays. What a ray alone would pay per
+//! node beyond its box test (ordering the children, pushing and popping them) the packet pays
+//! once.
+//!
+//! The packet visits nodes in another order than one ray alone, and where two candidates lie
+//! at exactly the nearest distance, which of them is the hit depends on the order. The packet
+//! tests every candidate that could tie (each lies in a leaf whose entry is at most that
+//! distance), so it notes a ray that met one ([`Best::tied`]) and the caller traces that ray
+//! again on its own: each ray's hit is the one [`Tracer::closest`](super::Tracer::closest)
+//! gives it, bit for bit. Only closest hits go this way (a first hit depends on the order).
+//!
+//! Where fewer than [`ALONE_BELOW`] rays of the packet reach a node, each walks its subtree
+//! alone (the one-ray walk, [`trace_blas`]): the packet's own work (the rays' entries per
+//! child, kept on its stack so that each ray prunes as it would alone) then no longer pays.
+
+use super::Ray;
+use super::query::{BoxRay, Entry, STACK_CAPACITY, nearest_first, prune_limit};
+use super::scene::Hit;
+use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, trace_blas};
+use super::triangle::ShearedRay;
+use crate::layout::view::View;
+use crate::layout::{InstanceRecord, LEAF_BIT};
+use std::borrow::Borrow;
+use wide::{f32x8, i32x8};
+
+/// Rays walked together.
+pub(super) const PACKET: usize = 8;
+
+/// A packet walk's stack: the children to visit, and for each the entry distance of every
+/// ray of the packet (+inf for a ray that does not reach it).
+struct PacketStack {
+    refs: [(u32, u32); STACK_CAPACITY],
+    t: [f32x8; STACK_CAPACITY],
+}
+
+/// The rays of one packet (at most [`PACKET`]): a packet writes the entries of its rays, and
+/// reads no others.
+struct Packet {
+    boxes: [BoxRay; PACKET],
+    sheared: [ShearedRay; PACKET],
+    t_min: [f32; PACKET],
+    best: [Best; PACKET],
+}
+
+/// What a packet walk works in, made once per [`Tracer`](super::Tracer) (about 30 KiB: made
+/// per batch, zeroing it cost more than a tenth of a sphere's primary rays' instructions).
+pub(super) struct Packets {
+    stack: PacketStack,
+    packet: Packet,
+    /// The stack of a ray that walks a subtree alone.
+    single: BlasStack,
+}
+
+impl Packets {
+    /// The stack of a ray walked alone.
+    pub(super) fn single(&mut self) -> &mut BlasStack {
+        &mut self.single
+    }
+
+    pub(super) fn new() -> Box<Packets> {
+        let idle = BoxRay::new([0.0; 3], [1.0; 3]);
+        Box::new(Packets {
+            stack: PacketStack {
+                refs: [(0, 0); STACK_CAPACITY],
+                t: [f32x8::ZERO; STACK_CAPACITY],
+            },
+            packet: Packet {
+                boxes: [idle; PACKET],
+                sheared: [ShearedRay::new([0.0; 3], [1.0; 3]); PACKET],
+                t_min: [0.0; PACKET],
+                best: [Best::miss(f32::NEG_INFINITY); PACKET],
+            },
+            single: [Entry::default(); STACK_CAPACITY],
+        })
+    }
+}
+
+/// The farthest entry distance at which ray `best` may still find a nearer hit: at most
+/// `f32::MAX`, so that +inf (a child the ray does not reach) is always past it.
+#[inline(always)]
+fn limit_of(best: &Best) -> f32 {
+    prune_limit(best.t).min(f32::MAX)
+}
+
+/// Walks the rays `group` (at most [`PACKET`] indices into `rays`, every one with
+/// permutation `P` and a finite inverse, as coherent as may be) through the bottom level
+/// `view` of instance `inst`, triangles `tris`, and writes each ray's closest hit to `hits`.
+/// `flip`: the instance flips facing. Returns the rays (bits, in `group`'s order) that met a
+/// tie, whose hits the caller must make again by the one-ray walk.
+#[allow(clippy::too_many_arguments)]
+#[inline(never)]
+pub(super) fn walk<const P: usize, T: LeafTriangles>(
+    view: &View,
+    inst: &InstanceRecord,
+    tris: T,
+    flip: bool,
+    rays: &[Ray],
+    group: &[u32],
+    work: &mut Packets,
+    hits: &mut [Hit],
+) -> u32 {
+    let Packets {
+        stack,
+        packet,
+        single,
+    } = work;
+    // Per ray (-inf past the packet's rays, which then never reach anything).
+    let mut limit = [f32::NEG_INFINITY; PACKET];
+    let mut live = 0u32;
+    for (r, &i) in group.iter().enumerate().take(PACKET) {
+        let Some(ray) = rays.get(i as usize) else {
+            continue;
+        };
+        let boxes = BoxRay::new(ray.origin, ray.direction);
+        packet.boxes[r] = boxes;
+        packet.t_min[r] = ray.t_min;
+        packet.best[r] = Best::miss(ray.t_max);
+        limit[r] = limit_of(&packet.best[r]);
+        live |= 1 << r;
+    }
+    let mut limits = f32x8::from(limit);
+    // The rays prepared for the triangle test (when they first reach a leaf: most rays of a
+    // camera that miss the structure never do).
+    let mut sheared = 0u32;
+    let (mut child, mut count, mut rays_in) = (0u32, 0u32, live);
+    let mut sp = 0usize;
+    let nodes = view.nodes;
+    let at = BlasAt { view, inst };
+    loop {
+        if rays_in.count_ones() < ALONE_BELOW {
+            // Too few rays left for the packet's work to pay: each walks the subtree alone.
+            let mut m = rays_in;
+            while m != 0 {
+                let r = m.trailing_zeros() as usize & (PACKET - 1);
+                m &= m - 1;
+                let Some(ray) = group.get(r).and_then(|&i| rays.get(i as usize)) else {
+                    continue;
+                };
+                let walk = Walk {
+                    sp: 0,
+                    cur: Entry {
+                        child,
+                        count,
+                        t: 0.0,
+                    },
+                };
+                let best = &mut packet.best[r];
+                if trace_blas::<P, T, true, false, true>(
+                    single,
+                    walk,
+                    &at,
+                    tris,
+                    &packet.boxes[r],
+                    ray,
+                    best,
+                ) {
+                    limit[r] = limit_of(best);
+                    limits = f32x8::from(limit);
+                }
+            }
+        } else if child & LEAF_BIT == 0 {
+            if let Some(node) = nodes.get(child as usize) {
+                crate::math::prefetch(&node.child);
+                // Each ray's test: the children it reaches and their entry distances.
+                let mut tests = [(0u32, INF8); PACKET];
+                // The children some ray reaches, and the rays that reach some child.
+                let (mut reached, mut reaching) = (0u32, 0u32);
+                let mut m = rays_in;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize & (PACKET - 1);
+                    m &= m - 1;
+                    let (hit, t) =
+                        packet.boxes[r].node::<P>(node, packet.t_min[r], packet.best[r].t);
+                    reached |= hit;
+                    reaching |= u32::from(hit != 0) << r;
+                    tests[r] = (hit, f32x8::from(t));
+                }
+                if reached != 0 && reached & (reached - 1) == 0 {
+                    // One child: every ray that reaches a child reaches it, and nothing is
+                    // pushed.
+                    let k = reached.trailing_zeros() as usize & 7;
+                    (child, count) = (node.child[k], node.count[k] as u32);
+                    rays_in = reaching;
+                    continue;
+                }
+                // Row `r`: ray `r`'s entry distance per child, +inf where it does not reach
+                // it (every child, for a ray that reaches none).
+                let mut rows = [INF8; PACKET];
+                let mut near = INF8;
+                let mut m = reaching;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize & (PACKET - 1);
+                    m &= m - 1;
+                    let (hit, t) = tests[r];
+                    let missed = (i32x8::splat(hit as i32) & LANE_BITS).simd_eq(i32x8::ZERO);
+                    let row = bytemuck::cast::<i32x8, f32x8>(missed).select(INF8, t);
+                    rows[r] = row;
+                    near = near.fast_min(row);
+                }
+                let rest = reached & reached.wrapping_sub(1);
+                if reached != 0 && rest & (rest - 1) == 0 {
+                    // Two children (no transpose, no ranks): the farther pushed with its
+                    // rays' entries, the nearer visited (on a tie the later lane, as
+                    // `descend` orders them).
+                    let near = near.to_array();
+                    let (a, b) = (
+                        reached.trailing_zeros() as usize & 7,
+                        rest.trailing_zeros() as usize & 7,
+                    );
+                    let (far, nearer) = if near[a] < near[b] { (b, a) } else { (a, b) };
+                    let column =
+                        |k: usize| f32x8::from(std::array::from_fn(|r| rows[r].as_array()[k]));
+                    let (Some(r), Some(t)) = (stack.refs.get_mut(sp), stack.t.get_mut(sp)) else {
+                        return live;
+                    };
+                    *r = (node.child[far], node.count[far] as u32);
+                    *t = column(far);
+                    sp += 1;
+                    (child, count) = (node.child[nearer], node.count[nearer] as u32);
+                    rays_in = column(nearer).simd_lt(INF8).to_bitmask();
+                    continue;
+                }
+                if reached != 0 {
+                    // The nearest entry per child orders them; column `k`: child `k`'s rays.
+                    let near = near.to_array();
+                    let columns = f32x8::transpose(rows);
+                    let order = nearest_first(&near, reached);
+                    let n = reached.count_ones() as usize;
+                    // Farthest deepest; the nearest is visited next, not pushed. (Room for a
+                    // node's children on any validated view, as for the one-ray walk.)
+                    let (Some(refs), Some(ts)) =
+                        (stack.refs.get_mut(sp..sp + n), stack.t.get_mut(sp..sp + n))
+                    else {
+                        return live;
+                    };
+                    for ((r, t), &k) in refs.iter_mut().zip(ts).zip(order[..n].iter().rev()) {
+                        let k = k as usize & 7;
+                        *r = (node.child[k], node.count[k] as u32);
+                        *t = columns[k];
+                    }
+                    let k = order[0] as usize & 7;
+                    (child, count) = (node.child[k], node.count[k] as u32);
+                    rays_in = columns[k].simd_lt(INF8).to_bitmask();
+                    sp += n - 1;
+                    continue;
+                }
+            }
+        } else {
+            let first = child & !LEAF_BIT;
+            let mut fresh = rays_in & !sheared;
+            sheared |= fresh;
+            while fresh != 0 {
+                let r = fresh.trailing_zeros() as usize & (PACKET - 1);
+                fresh &= fresh - 1;
+                packet.sheared[r] = packet.boxes[r].sheared::<P>();
+            }
+            let mut m = rays_in;
+            let mut accepted = false;
+            while m != 0 {
+                let r = m.trailing_zeros() as usize & (PACKET - 1);
+                m &= m - 1;
+                let best = &mut packet.best[r];
+                if leaf::<P, T>(
+                    tris,
+                    flip,
+                    &packet.sheared[r],
+                    packet.t_min[r],
+                    best,
+                    first,
+                    count,
+                ) {
+                    limit[r] = limit_of(best);
+                    accepted = true;
+                }
+            }
+            if accepted {
+                limits = f32x8::from(limit);
+            }
+        }
+        // The nearest entry that some of its rays may still find a nearer hit in.
+        loop {
+            if sp == 0 {
+                let mut tied = 0;
+                for (r, &i) in group.iter().enumerate().take(PACKET) {
+                    tied |= u32::from(packet.best[r].tied) << r;
+                    if let Some(h) = hits.get_mut(i as usize) {
+                        *h = hit(&packet.best[r], inst, Some(view));
+                    }
+                }
+                return tied;
+            }
+            sp -= 1;
+            let (Some(&r), Some(t)) = (stack.refs.get(sp), stack.t.get(sp)) else {
+                return live;
+            };
+            let open = t.simd_le(limits).to_bitmask();
+            if open != 0 {
+                (child, count, rays_in) = (r.0, r.1, open);
+                break;
+            }
+        }
+    }
+}
+
+/// Fewer rays than this reaching a node walk its subtree one at a time.
+const ALONE_BELOW: u32 = 2;
+
+const LANE_BITS: i32x8 = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
+const INF8: f32x8 = f32x8::new([f32::INFINITY; 8]);
+
+/// The triangles of leaf `first`, `count` tested by one ray of a packet (no culling), noting
+/// a candidate at exactly the hit's distance ([`Best::ties`]) instead of deciding between the
+/// two. Returns whether one was accepted.
+#[inline(always)]
+fn leaf<const P: usize, T: LeafTriangles>(
+    tris: T,
+    flip: bool,
+    sheared: &ShearedRay,
+    t_min: f32,
+    best: &mut Best,
+    first: u32,
+    count: u32,
+) -> bool {
+    if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+        let bound = best.tie_bound();
+        let Some((k, h)) =
+            tris.nearest::<P, false>(sheared, first as usize, count as usize, t_min, bound)
+        else {
+            return false;
+        };
+        if best.ties(h.t) {
+            return false;
+        }
+        best.accept_triangle(first + k, &h, h.front_face != flip);
+        return true;
+    }
+    let mut found = false;
+    for (p, tri) in (first..).zip(tris.leaf(first as usize, count as usize)) {
+        let Some(h) = T::intersect::<P>(sheared, tri.borrow()) else {
+            continue;
+        };
+        if h.t > t_min && h.t < best.tie_bound() && !best.ties(h.t) {
+            best.accept_triangle(p, &h, h.front_face != flip);
+            found = true;
+        }
+    }
+    found
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::traverse::triangle::{TriangleHit, by_permutation, permutation};
+
+    /// A packet's leaf test (of three triangles: the eight-wide test where the build has AVX,
+    /// else the loop) notes a candidate at exactly the hit's distance, found earlier in another
+    /// leaf, and does not take it; a nearer one it takes, noting nothing.
+    #[test]
+    fn a_leaf_notes_a_tie_with_the_hit_so_far() {
+        let flat = |x: f32, z: f32| [x, 0.0, z, x + 1.0, 0.0, z, x, 1.0, z];
+        // One at z = 0 (the hit's distance), one off the ray, and one farther (z = -1, after
+        // it) or nearer (z = 1, before it).
+        for (z, tied) in [(-1.0, true), (1.0, false)] {
+            let other = flat(0.0, z);
+            let (off, at_hit) = (flat(5.0, -2.0), flat(0.0, 0.0));
+            let tris = if tied {
+                [off, at_hit, other]
+            } else {
+                [other, off, at_hit]
+            };
+            let tris = &tris[..];
+            let hit_slot = if tied { 1 } else { 2 };
+            let d = [1e-3, 2e-3, -1.0];
+            let boxes = BoxRay::new([0.2, 0.2, 4.0], d);
+            by_permutation!(permutation(d), P => {
+                let sheared = boxes.sheared::<P>();
+                // The hit so far: the middle triangle's distance, from a copy in another leaf.
+                let t = sheared.intersect_axes::<P>(&tris[hit_slot]).unwrap().t;
+                let mut best = Best::miss(f32::INFINITY);
+                let h = TriangleHit { t, b: 0.0, c: 0.0, front_face: true };
+                best.accept_triangle(7, &h, true);
+                let accepted = leaf::<P, &[[f32; 9]]>(tris, false, &sheared, 0.0, &mut best, 0, 3);
+                if tied {
+                    assert!(best.tied && !accepted, "the tie is noted, not taken");
+                    assert_eq!(best.t, t);
+                } else {
+                    assert!(!best.tied && accepted, "the nearer one is taken");
+                    assert!(best.t < t);
+                }
+            });
+        }
+    }
+}
