@@ -13,9 +13,10 @@
 //!   `Tracer::closest` gives it) over a single-instance TLAS (identity transform) built with
 //!   `quick::build_single_instance_tlas`: ray queries always start at a TLAS in Vulkan, so
 //!   hostas pays for one instance level that the peers (which trace the BLAS directly) do not.
-//!   Rays that do not share an origin, through a structure of 16 MiB or more, are walked eight
-//!   at a time (the 1M-triangle scenes' and the crown's incoherent rays); every other ray one
-//!   at a time, as `Tracer::closest`.
+//!   Rays that share an origin (the primary rays) are walked in packets of eight; others,
+//!   through a structure of 16 MiB or more, eight at a time, interleaved (the 1M-triangle
+//!   scenes' and the crown's incoherent rays); every other ray one at a time, as
+//!   `Tracer::closest`.
 //! - SAH and bytes: what `Device::statistics` reports: `sah_cost` (node visit 1, primitive
 //!   test 1, relative to the root box, on hostas's own 8-wide tree, so it is not the same
 //!   quantity as the binary-tree SAH of the peers) and `used_bytes` (header, geometry records,
@@ -101,9 +102,9 @@ fn trace_blas(
 
 fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
     // hostas's batch path: a Tracer reuses its views and stacks across rays, and
-    // `closest_batch` walks rays several at once where that measured faster (rays that do not
-    // share an origin, through a bottom level of 16 MiB or more); each ray's hit is the one
-    // `Tracer::closest` gives it. Batches of 1024: each permutation's share of a batch is
+    // `closest_batch` walks rays several at once where that measured faster (a camera's rays
+    // in packets; other rays interleaved through a bottom level of 16 MiB or more); each
+    // ray's hit is the one `Tracer::closest` gives it. Batches of 1024: each permutation's share of a batch is
     // walked eight rays at a time, slower at its end, where fewer than eight remain (batches
     // of 256 lost most of the boxes' gain, 1.34x with 4096), while the batch's rays and hits
     // (about 90 bytes per ray) should stay near the core for the rays traced one at a time.
