@@ -1074,8 +1074,11 @@ pub(super) struct BlasAt<'a, 's> {
 /// offsets and works with integer minima, maxima and compare; for other rays with `P`
 /// [`ANY_AXES`] (the general node test, the permutation read at run time); and apart for a
 /// structure of AABBs (`TRIANGLES` false, `P` [`ANY_AXES`], `T` unused), so that neither loop
-/// holds what only the other needs. Not inlined: the bottom-level loop is the hot one and gets
-/// the registers to itself.
+/// holds what only the other needs. With `TIES` (a packet's ray walking a subtree alone,
+/// closest hits of triangles), a triangle at exactly the hit's distance is noted
+/// ([`Best::ties`]) rather than decided, so that the ray can be traced again on its own; the
+/// other walks are instantiated without it and keep their code. Not inlined: the bottom-level
+/// loop is the hot one and gets the registers to itself.
 #[inline(never)]
 pub(super) fn trace_blas<
     const P: usize,
