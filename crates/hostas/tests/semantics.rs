@@ -790,6 +790,25 @@ fn batch_tracing_matches_single_rays() {
     }
 }
 
+/// `rays`' closest hits by `tracer.closest_batch_with(rays, mode)` into `hits`, each checked
+/// against `Scene::trace_closest` bit for bit (`what` names the batch in a failure).
+fn closest_batch_checked<'h>(
+    tracer: &mut hostas::Tracer,
+    scene: &hostas::Scene,
+    rays: &[Ray],
+    mode: Interleave,
+    hits: &'h mut Vec<hostas::Hit>,
+    what: &str,
+) -> &'h [hostas::Hit] {
+    tracer.closest_batch_with(rays, hits, mode).unwrap();
+    assert_eq!(hits.len(), rays.len());
+    for (k, (ray, hit)) in rays.iter().zip(hits.iter()).enumerate() {
+        let single = scene.trace_closest(ray).unwrap();
+        assert_eq!(*hit, single, "{what}, {mode:?}, ray {k}: {ray:?}");
+    }
+    hits
+}
+
 /// `Tracer::closest_batch` gives every ray the hit `Tracer::closest` gives it, and
 /// `Tracer::any_batch` the hit `Tracer::any` gives it, bit for bit: on
 /// single identity instances of random (and adversarial) triangles, where rays of the common
@@ -845,16 +864,9 @@ fn tracer_batches_match_single_rays() {
                 1 => Interleave::Packets,
                 _ => Interleave::Always,
             };
-            tracer.closest_batch_with(rs, &mut batch, mode).unwrap();
-            assert_eq!(batch.len(), rs.len());
-            for (k, (ray, hit)) in rs.iter().zip(&batch).enumerate() {
-                let single = scene.trace_closest(ray).unwrap();
-                assert_eq!(
-                    *hit, single,
-                    "round {round}, {mode:?}, batch of {len}, ray {k}: {ray:?}"
-                );
-                hit_count += usize::from(hit.is_hit());
-            }
+            let what = format!("round {round}, batch of {len}");
+            let hits = closest_batch_checked(&mut tracer, &scene, rs, mode, &mut batch, &what);
+            hit_count += hits.iter().filter(|h| h.is_hit()).count();
             // First hits: the one the one-ray walk accepts first, not any hit.
             tracer.any_batch_with(rs, &mut batch, mode).unwrap();
             assert_eq!(batch.len(), rs.len());
@@ -937,16 +949,11 @@ fn packets_match_single_rays() {
             (Interleave::Packets, 13),
         ] {
             for rs in rays.chunks(len) {
-                tracer.closest_batch_with(rs, &mut batch, mode).unwrap();
-                assert_eq!(batch.len(), rs.len());
-                for (k, (ray, hit)) in rs.iter().zip(&batch).enumerate() {
-                    let single = scene.trace_closest(ray).unwrap();
-                    assert_eq!(
-                        *hit, single,
-                        "round {round}, {mode:?}, batch of {len}, ray {k}: {ray:?}"
-                    );
-                    hit_count += usize::from(hit.is_hit());
-                    tied += usize::from(hit.is_hit() && hit.t == 1.0 && round % 3 == 2);
+                let what = format!("round {round}, batch of {len}");
+                let hits = closest_batch_checked(&mut tracer, &scene, rs, mode, &mut batch, &what);
+                for hit in hits.iter().filter(|h| h.is_hit()) {
+                    hit_count += 1;
+                    tied += usize::from(hit.t == 1.0 && round % 3 == 2);
                 }
             }
         }

@@ -15,11 +15,10 @@
 use super::Ray;
 use super::query::{ANY_AXES, BoxRay, Entry, descend, warm};
 use super::scene::Hit;
-use super::tracer::{Best, BlasStack, LeafTriangles, hit, pop};
+use super::tracer::{Best, BlasStack, LeafTriangles, hit, leaf, pop};
 use super::triangle::ShearedRay;
 use crate::layout::view::View;
 use crate::layout::{InstanceRecord, LEAF_BIT};
-use std::borrow::Borrow;
 
 /// Rays walked at once by one thread.
 pub(super) const LANES: usize = 8;
@@ -162,7 +161,16 @@ fn step<const P: usize, T: LeafTriangles, const FIRST: bool>(
             lane.cur = next;
             return false;
         }
-    } else if leaf::<P, T, FIRST>(tris, flip, lane, cur) && FIRST {
+    } else if leaf::<P, T, FIRST, false>(
+        tris,
+        flip,
+        &lane.sheared,
+        lane.t_min,
+        &mut lane.best,
+        cur.child & !LEAF_BIT,
+        cur.count,
+    ) && FIRST
+    {
         return true;
     }
     match pop(stack, &mut lane.sp, lane.best.t) {
@@ -172,44 +180,4 @@ fn step<const P: usize, T: LeafTriangles, const FIRST: bool>(
         }
         None => true,
     }
-}
-
-/// The triangles of leaf `cur` tested as the one-ray walk tests them (no culling); with
-/// `FIRST`, up to the first accepted. Returns whether one was accepted.
-#[inline(always)]
-fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool>(
-    tris: T,
-    flip: bool,
-    lane: &mut Lane,
-    cur: Entry,
-) -> bool {
-    let first = cur.child & !LEAF_BIT;
-    let best = &mut lane.best;
-    if T::NEAREST_FROM != u32::MAX && cur.count >= T::NEAREST_FROM {
-        let Some((k, h)) = tris.nearest::<P, FIRST>(
-            &lane.sheared,
-            first as usize,
-            cur.count as usize,
-            lane.t_min,
-            best.t,
-        ) else {
-            return false;
-        };
-        best.accept_triangle(first + k, &h, h.front_face != flip);
-        return true;
-    }
-    let mut found = false;
-    for (p, tri) in (first..).zip(tris.leaf(first as usize, cur.count as usize)) {
-        let Some(h) = T::intersect::<P>(&lane.sheared, tri.borrow()) else {
-            continue;
-        };
-        if h.t > lane.t_min && h.t < best.t {
-            best.accept_triangle(p, &h, h.front_face != flip);
-            found = true;
-            if FIRST {
-                break;
-            }
-        }
-    }
-    found
 }

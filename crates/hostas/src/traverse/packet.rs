@@ -20,11 +20,10 @@
 use super::Ray;
 use super::query::{BoxRay, Entry, STACK_CAPACITY, nearest_first, prune_limit};
 use super::scene::Hit;
-use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, trace_blas};
+use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, trace_blas};
 use super::triangle::ShearedRay;
 use crate::layout::view::View;
 use crate::layout::{InstanceRecord, LEAF_BIT};
-use std::borrow::Borrow;
 use wide::{f32x8, i32x8};
 
 /// Rays walked together.
@@ -44,6 +43,9 @@ struct Packet {
     sheared: [ShearedRay; PACKET],
     t_min: [f32; PACKET],
     best: [Best; PACKET],
+    /// At the current node, each ray's test: the children it reaches and their entry
+    /// distances (written for the rays that reached the node; kept here, not made per node).
+    tests: [(u32, f32x8); PACKET],
 }
 
 /// What a packet walk works in, made once per [`Tracer`](super::Tracer) (about 30 KiB: made
@@ -73,6 +75,7 @@ impl Packets {
                 sheared: [ShearedRay::new([0.0; 3], [1.0; 3]); PACKET],
                 t_min: [0.0; PACKET],
                 best: [Best::miss(f32::NEG_INFINITY); PACKET],
+                tests: [(0, INF8); PACKET],
             },
             single: [Entry::default(); STACK_CAPACITY],
         })
@@ -165,8 +168,6 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
         } else if child & LEAF_BIT == 0 {
             if let Some(node) = nodes.get(child as usize) {
                 crate::math::prefetch(&node.child);
-                // Each ray's test: the children it reaches and their entry distances.
-                let mut tests = [(0u32, INF8); PACKET];
                 // The children some ray reaches, and the rays that reach some child.
                 let (mut reached, mut reaching) = (0u32, 0u32);
                 let mut m = rays_in;
@@ -177,7 +178,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                         packet.boxes[r].node::<P>(node, packet.t_min[r], packet.best[r].t);
                     reached |= hit;
                     reaching |= u32::from(hit != 0) << r;
-                    tests[r] = (hit, f32x8::from(t));
+                    packet.tests[r] = (hit, f32x8::from(t));
                 }
                 if reached != 0 && reached & (reached - 1) == 0 {
                     // One child: every ray that reaches a child reaches it, and nothing is
@@ -195,7 +196,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 while m != 0 {
                     let r = m.trailing_zeros() as usize & (PACKET - 1);
                     m &= m - 1;
-                    let (hit, t) = tests[r];
+                    let (hit, t) = packet.tests[r];
                     let missed = (i32x8::splat(hit as i32) & LANE_BITS).simd_eq(i32x8::ZERO);
                     let row = bytemuck::cast::<i32x8, f32x8>(missed).select(INF8, t);
                     rows[r] = row;
@@ -264,7 +265,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 let r = m.trailing_zeros() as usize & (PACKET - 1);
                 m &= m - 1;
                 let best = &mut packet.best[r];
-                if leaf::<P, T>(
+                if leaf::<P, T, false, true>(
                     tris,
                     flip,
                     &packet.sheared[r],
@@ -312,45 +313,6 @@ const ALONE_BELOW: u32 = 2;
 const LANE_BITS: i32x8 = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
 const INF8: f32x8 = f32x8::new([f32::INFINITY; 8]);
 
-/// The triangles of leaf `first`, `count` tested by one ray of a packet (no culling), noting
-/// a candidate at exactly the hit's distance ([`Best::ties`]) instead of deciding between the
-/// two. Returns whether one was accepted.
-#[inline(always)]
-fn leaf<const P: usize, T: LeafTriangles>(
-    tris: T,
-    flip: bool,
-    sheared: &ShearedRay,
-    t_min: f32,
-    best: &mut Best,
-    first: u32,
-    count: u32,
-) -> bool {
-    if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
-        let bound = best.tie_bound();
-        let Some((k, h)) =
-            tris.nearest::<P, false>(sheared, first as usize, count as usize, t_min, bound)
-        else {
-            return false;
-        };
-        if best.ties(h.t) {
-            return false;
-        }
-        best.accept_triangle(first + k, &h, h.front_face != flip);
-        return true;
-    }
-    let mut found = false;
-    for (p, tri) in (first..).zip(tris.leaf(first as usize, count as usize)) {
-        let Some(h) = T::intersect::<P>(sheared, tri.borrow()) else {
-            continue;
-        };
-        if h.t > t_min && h.t < best.tie_bound() && !best.ties(h.t) {
-            best.accept_triangle(p, &h, h.front_face != flip);
-            found = true;
-        }
-    }
-    found
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -383,7 +345,7 @@ mod tests {
                 let mut best = Best::miss(f32::INFINITY);
                 let h = TriangleHit { t, b: 0.0, c: 0.0, front_face: true };
                 best.accept_triangle(7, &h, true);
-                let accepted = leaf::<P, &[[f32; 9]]>(tris, false, &sheared, 0.0, &mut best, 0, 3);
+                let accepted = leaf::<P, &[[f32; 9]], false, true>(tris, false, &sheared, 0.0, &mut best, 0, 3);
                 if tied {
                     assert!(best.tied && !accepted, "the tie is noted, not taken");
                     assert_eq!(best.t, t);

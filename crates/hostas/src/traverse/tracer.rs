@@ -99,6 +99,23 @@ impl<'s> Direct<'s> {
         })
     }
 
+    /// The axis permutation of `ray` where it is of the common case that batches walk several
+    /// at a time (no culling flag, no `TERMINATE_ON_FIRST_HIT` where `first_hit_alone`, the
+    /// instance's mask met, a direction whose inverse is finite); `None` for a ray to trace on
+    /// its own.
+    #[inline(always)]
+    fn common_permutation(&self, ray: &Ray, first_hit_alone: bool) -> Option<usize> {
+        let first_hit = if first_hit_alone {
+            RayFlags::TERMINATE_ON_FIRST_HIT.0
+        } else {
+            0
+        };
+        let common = ray.flags.0 & (CULLING.0 | first_hit | self.skip) == 0
+            && self.mask & ray.cull_mask != 0
+            && ray.direction.iter().all(|&c| (1.0 / c).is_finite());
+        common.then(|| permutation(ray.direction))
+    }
+
     /// A valid ray's hit, walked on `stack`.
     #[inline(always)]
     fn trace(&self, stack: &mut BlasStack, ray: &Ray, first_hit: bool) -> Hit {
@@ -356,20 +373,16 @@ impl<'s> Tracer<'s> {
             .direct
             .as_ref()
             .is_some_and(|d| d.view.prim_kind == PrimKind::Triangles);
-        let packets = match interleave {
-            Interleave::Packets => true,
-            Interleave::Auto => share_origins(rays),
-            _ => false,
-        };
-        if packets && !FIRST && triangles {
+        let shared = interleave == Interleave::Auto && share_origins(rays);
+        if !FIRST && triangles && (interleave == Interleave::Packets || shared) {
             return self.packets(rays, hits);
         }
         let direct = self.direct.as_ref().filter(|d| {
-            d.view.prim_kind == PrimKind::Triangles
+            triangles
                 && match interleave {
                     Interleave::Always => true,
                     Interleave::Never | Interleave::Packets => false,
-                    Interleave::Auto => d.interleave && !share_origins(rays),
+                    Interleave::Auto => d.interleave && !shared,
                 }
         });
         let Some(d) = direct else {
@@ -396,31 +409,18 @@ impl<'s> Tracer<'s> {
         // (Written out of order below, every one exactly once.)
         hits.resize(rays.len(), Hit::MISS);
         let (view, inst) = (d.view, d.inst);
-        let (mask, skip) = (d.mask, d.skip);
         // Rays by class (a permutation, or `ONE_BY_ONE`), in order within each: a counting sort.
         const ONE_BY_ONE: u8 = 6;
-        // (In a batch of closest hits, a ray with `TerminateOnFirstHit` goes one at a time,
-        // through `Tracer::closest`, which honours the flag.)
-        let first_hit = if FIRST {
-            0
-        } else {
-            RayFlags::TERMINATE_ON_FIRST_HIT.0
-        };
-        let not_common = CULLING.0 | first_hit | skip;
         let mut classes = std::mem::take(&mut self.classes);
         classes.clear();
         let mut starts = [0usize; ONE_BY_ONE as usize + 2];
         for (i, r) in rays.iter().enumerate() {
             r.validate().map_err(|e| e.in_ray(i))?;
-            let inv = r.direction.map(|d| 1.0 / d);
-            let c = if r.flags.0 & not_common != 0
-                || mask & r.cull_mask == 0
-                || !inv.iter().all(|i| i.is_finite())
-            {
-                ONE_BY_ONE
-            } else {
-                permutation(r.direction) as u8
-            };
+            // (In a batch of closest hits, a ray with `TerminateOnFirstHit` goes one at a time,
+            // through `Tracer::closest`, which honours the flag.)
+            let c = d
+                .common_permutation(r, !FIRST)
+                .map_or(ONE_BY_ONE, |p| p as u8);
             classes.push(c);
             if let Some(n) = starts.get_mut(c as usize + 1) {
                 *n += 1;
@@ -489,12 +489,10 @@ impl<'s> Tracer<'s> {
             return Ok(());
         };
         let (view, inst) = (d.view, d.inst);
-        let not_common = CULLING.0 | RayFlags::TERMINATE_ON_FIRST_HIT.0 | d.skip;
-        let mask = d.mask;
         let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
         let mut work = self.packet_work.take().unwrap_or_else(Packets::new);
         let mut retraced = 0;
-        let mut walk = |group: &[u32], perm: usize, work: &mut Packets| {
+        let mut walk = |group: &[u32], perm: usize, work: &mut Packets, hits: &mut [Hit]| {
             let tied = by_permutation!(perm, P => match view.triangles {
                 Triangles::Direct(t) => packet::walk::<P, _>(
                     &view, inst, t, flip, rays, group, work, hits,
@@ -516,39 +514,34 @@ impl<'s> Tracer<'s> {
         };
         let mut group = [0u32; packet::PACKET];
         let (mut n, mut group_perm) = (0, 0);
-        let mut alone = Vec::new();
+        let mut result = Ok(());
         for (i, r) in rays.iter().enumerate() {
             if let Err(e) = r.validate() {
-                self.packet_work = Some(work);
-                return Err(e.in_ray(i));
+                result = Err(e.in_ray(i));
+                break;
             }
-            let common = r.flags.0 & not_common == 0
-                && mask & r.cull_mask != 0
-                && r.direction.iter().all(|&c| (1.0 / c).is_finite());
-            if !common {
-                alone.push(i);
+            let Some(perm) = d.common_permutation(r, true) else {
+                // (Validated: traced at once, as `Tracer::closest` would.)
+                let first_hit = r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
+                if let Some(h) = hits.get_mut(i) {
+                    *h = d.trace(work.single(), r, first_hit);
+                }
                 continue;
-            }
-            let perm = permutation(r.direction);
+            };
             if n == packet::PACKET || (n > 0 && perm != group_perm) {
-                walk(&group[..n], group_perm, &mut work);
+                walk(&group[..n], group_perm, &mut work, hits);
                 n = 0;
             }
             group[n] = i as u32;
             n += 1;
             group_perm = perm;
         }
-        if n > 0 {
-            walk(&group[..n], group_perm, &mut work);
+        if n > 0 && result.is_ok() {
+            walk(&group[..n], group_perm, &mut work, hits);
         }
         self.packet_work = Some(work);
         self.retraced += retraced;
-        for i in alone {
-            if let (Some(r), Some(h)) = (rays.get(i), hits.get_mut(i)) {
-                *h = self.closest(r).map_err(|e| e.in_ray(i))?;
-            }
-        }
-        Ok(())
+        result
     }
 
     fn blas(&mut self, index: u32) -> Option<View<'s>> {
@@ -832,6 +825,52 @@ pub(super) trait LeafTriangles: TriangleSource {
     ) -> Option<(u32, TriangleHit)> {
         None
     }
+}
+
+/// The triangles of leaf `first`, `count` tested by one ray with no culling, as the one-ray
+/// walk tests them (`flip`: the instance flips facing), for the walks of several rays at once:
+/// with `FIRST` up to the first accepted; with `TIES` (a packet's) a candidate at exactly the
+/// hit's distance is noted ([`Best::ties`]) rather than decided. Returns whether one was
+/// accepted.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+pub(super) fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool, const TIES: bool>(
+    tris: T,
+    flip: bool,
+    sheared: &ShearedRay,
+    t_min: f32,
+    best: &mut Best,
+    first: u32,
+    count: u32,
+) -> bool {
+    if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+        let bound = if TIES { best.tie_bound() } else { best.t };
+        let Some((k, h)) =
+            tris.nearest::<P, FIRST>(sheared, first as usize, count as usize, t_min, bound)
+        else {
+            return false;
+        };
+        if TIES && best.ties(h.t) {
+            return false;
+        }
+        best.accept_triangle(first + k, &h, h.front_face != flip);
+        return true;
+    }
+    let mut found = false;
+    for (p, tri) in (first..).zip(tris.leaf(first as usize, count as usize)) {
+        let Some(h) = T::intersect::<P>(sheared, tri.borrow()) else {
+            continue;
+        };
+        let bound = if TIES { best.tie_bound() } else { best.t };
+        if h.t > t_min && h.t < bound && !(TIES && best.ties(h.t)) {
+            best.accept_triangle(p, &h, h.front_face != flip);
+            found = true;
+            if FIRST {
+                break;
+            }
+        }
+    }
+    found
 }
 
 /// The loop of [`LeafTriangles::nearest`] over `tris` one at a time (offsets from `base`).
