@@ -1,7 +1,9 @@
 //! Closest hits for coherent rays (a camera's primary rays), [`PACKET`] at a time: one walk
-//! over the nodes any of them reaches. Each node's eight children are tested against every
-//! ray of the packet that reached the node (each ray's own test, as the one-ray walk does it),
-//! and the children any ray reaches are ordered and pushed once for all, each with the set of
+//! over the nodes any of them reaches. The rays of a packet share an origin and the signs of
+//! their directions ([`share_a_walk`]), so a node's planes lie at the same offsets from all of
+//! them: the node test's subtractions are made once per node ([`BoxRay::offsets`]), and each
+//! ray that reached the node finishes its own test from them (bit for bit the one-ray walk's).
+//! The children any ray reaches are ordered and pushed once for all, each with the set of
 //! rays that reach it. A leaf is tested by each of its rays. What a ray alone would pay per
 //! node beyond its box test (ordering the children, pushing and popping them) the packet pays
 //! once.
@@ -24,7 +26,8 @@ use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, tra
 use super::triangle::ShearedRay;
 use crate::layout::view::View;
 use crate::layout::{InstanceRecord, LEAF_BIT};
-use wide::{f32x8, i32x8};
+use crate::math::INTEGER_MIN_MAX;
+use wide::f32x8;
 
 /// Rays walked together.
 pub(super) const PACKET: usize = 8;
@@ -43,9 +46,6 @@ struct Packet {
     sheared: [ShearedRay; PACKET],
     t_min: [f32; PACKET],
     best: [Best; PACKET],
-    /// At the current node, each ray's test: the children it reaches and their entry
-    /// distances (written for the rays that reached the node; kept here, not made per node).
-    tests: [(u32, f32x8); PACKET],
 }
 
 /// What a packet walk works in, made once per [`Tracer`](super::Tracer) (about 30 KiB: made
@@ -75,7 +75,6 @@ impl Packets {
                 sheared: [ShearedRay::new([0.0; 3], [1.0; 3]); PACKET],
                 t_min: [0.0; PACKET],
                 best: [Best::miss(f32::NEG_INFINITY); PACKET],
-                tests: [(0, INF8); PACKET],
             },
             single: [Entry::default(); STACK_CAPACITY],
         })
@@ -89,11 +88,23 @@ fn limit_of(best: &Best) -> f32 {
     prune_limit(best.t).min(f32::MAX)
 }
 
+/// Whether rays `a` and `b` may walk in one packet: the same origin and the same signs of
+/// direction, bit for bit, so that a node's planes lie at the same offsets from both and both
+/// read the same planes (the node test's subtractions, made once for the packet).
+#[inline(always)]
+pub(super) fn share_a_walk(a: &Ray, b: &Ray) -> bool {
+    // (Differences as bits, every lane at once: one branch.)
+    let apart =
+        |u: [f32; 3], v: [f32; 3]| (0..3).fold(0, |m, k| m | (u[k].to_bits() ^ v[k].to_bits()));
+    (apart(a.origin, b.origin) | (apart(a.direction, b.direction) & 1 << 31)) == 0
+}
+
 /// Walks the rays `group` (at most [`PACKET`] indices into `rays`, every one with
 /// permutation `P` and a finite inverse, as coherent as may be) through the bottom level
 /// `view` of instance `inst`, triangles `tris`, and writes each ray's closest hit to `hits`.
-/// `flip`: the instance flips facing. Returns the rays (bits, in `group`'s order) that met a
-/// tie, whose hits the caller must make again by the one-ray walk.
+/// `flip`: the instance flips facing. Returns the rays (bits, in `group`'s order) whose hits
+/// the caller must make by the one-ray walk: those that met a tie, and those that do not
+/// [`share_a_walk`] with the first (which the packet leaves alone).
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 pub(super) fn walk<const P: usize, T: LeafTriangles>(
@@ -113,11 +124,16 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
     } = work;
     // Per ray (-inf past the packet's rays, which then never reach anything).
     let mut limit = [f32::NEG_INFINITY; PACKET];
-    let mut live = 0u32;
+    let (mut live, mut apart) = (0u32, 0u32);
+    let lead = group.first().and_then(|&i| rays.get(i as usize));
     for (r, &i) in group.iter().enumerate().take(PACKET) {
-        let Some(ray) = rays.get(i as usize) else {
+        let (Some(ray), Some(lead)) = (rays.get(i as usize), lead) else {
             continue;
         };
+        if !share_a_walk(lead, ray) {
+            apart |= 1 << r;
+            continue;
+        }
         let boxes = BoxRay::new(ray.origin, ray.direction);
         packet.boxes[r] = boxes;
         packet.t_min[r] = ray.t_min;
@@ -168,17 +184,30 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
         } else if child & LEAF_BIT == 0 {
             if let Some(node) = nodes.get(child as usize) {
                 crate::math::prefetch(&node.child);
-                // The children some ray reaches, and the rays that reach some child.
+                // The planes' offsets from the packet's origin, for all its rays.
+                let first = rays_in.trailing_zeros() as usize & (PACKET - 1);
+                let offsets = packet.boxes[first].offsets::<P>(node);
+                // The children some ray reaches, the rays that reach some child, and row `r`:
+                // ray `r`'s entry distance per child, +inf where it does not reach it (every
+                // child, for a ray that reaches none or did not reach the node).
                 let (mut reached, mut reaching) = (0u32, 0u32);
+                let mut rows = [INF8; PACKET];
+                let mut near = INF8;
                 let mut m = rays_in;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize & (PACKET - 1);
                     m &= m - 1;
-                    let (hit, t) =
-                        packet.boxes[r].node::<P>(node, packet.t_min[r], packet.best[r].t);
+                    let (t, missed) = packet.boxes[r].slabs_from::<INTEGER_MIN_MAX>(
+                        &offsets,
+                        packet.t_min[r],
+                        packet.best[r].t,
+                    );
+                    let hit = !missed.to_bitmask() & 0xff;
                     reached |= hit;
                     reaching |= u32::from(hit != 0) << r;
-                    packet.tests[r] = (hit, f32x8::from(t));
+                    let row = missed.select(INF8, t);
+                    rows[r] = row;
+                    near = near.fast_min(row);
                 }
                 if reached != 0 && reached & (reached - 1) == 0 {
                     // One child: every ray that reaches a child reaches it, and nothing is
@@ -187,20 +216,6 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     (child, count) = (node.child[k], node.count[k] as u32);
                     rays_in = reaching;
                     continue;
-                }
-                // Row `r`: ray `r`'s entry distance per child, +inf where it does not reach
-                // it (every child, for a ray that reaches none).
-                let mut rows = [INF8; PACKET];
-                let mut near = INF8;
-                let mut m = reaching;
-                while m != 0 {
-                    let r = m.trailing_zeros() as usize & (PACKET - 1);
-                    m &= m - 1;
-                    let (hit, t) = packet.tests[r];
-                    let missed = (i32x8::splat(hit as i32) & LANE_BITS).simd_eq(i32x8::ZERO);
-                    let row = bytemuck::cast::<i32x8, f32x8>(missed).select(INF8, t);
-                    rows[r] = row;
-                    near = near.fast_min(row);
                 }
                 let rest = reached & reached.wrapping_sub(1);
                 if reached != 0 && rest & (rest - 1) == 0 {
@@ -216,7 +231,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     let column =
                         |k: usize| f32x8::from(std::array::from_fn(|r| rows[r].as_array()[k]));
                     let (Some(r), Some(t)) = (stack.refs.get_mut(sp), stack.t.get_mut(sp)) else {
-                        return live;
+                        return live | apart;
                     };
                     *r = (node.child[far], node.count[far] as u32);
                     *t = column(far);
@@ -236,7 +251,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     let (Some(refs), Some(ts)) =
                         (stack.refs.get_mut(sp..sp + n), stack.t.get_mut(sp..sp + n))
                     else {
-                        return live;
+                        return live | apart;
                     };
                     for ((r, t), &k) in refs.iter_mut().zip(ts).zip(order[..n].iter().rev()) {
                         let k = k as usize & 7;
@@ -292,11 +307,11 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                         *h = hit(&packet.best[r], inst, Some(view));
                     }
                 }
-                return tied;
+                return tied | apart;
             }
             sp -= 1;
             let (Some(&r), Some(t)) = (stack.refs.get(sp), stack.t.get(sp)) else {
-                return live;
+                return live | apart;
             };
             let open = t.simd_le(limits).to_bitmask();
             if open != 0 {
@@ -310,7 +325,6 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
 /// Fewer rays than this reaching a node walk its subtree one at a time.
 const ALONE_BELOW: u32 = 2;
 
-const LANE_BITS: i32x8 = i32x8::new([1, 2, 4, 8, 16, 32, 64, 128]);
 const INF8: f32x8 = f32x8::new([f32::INFINITY; 8]);
 
 #[cfg(test)]

@@ -176,6 +176,16 @@ pub(super) fn prune_limit(t_max: f32) -> f32 {
     t_max * PRUNE_SLACK
 }
 
+/// The offsets `origin - plane` of a node's children's near and far planes on each axis, as
+/// the node test subtracts them ([`BoxRay::offsets`]): the part of the test that rays sharing
+/// an origin and the signs of their directions (and so the rows they read) share, made once
+/// for a packet of them.
+#[derive(Clone, Copy)]
+pub(super) struct PlaneOffsets {
+    near: [f32x8; 3],
+    far: [f32x8; 3],
+}
+
 #[derive(Clone, Copy)]
 pub(super) struct BoxRay {
     /// The direction (x, y, z and a zero lane).
@@ -293,6 +303,14 @@ impl BoxRay {
         t_min: f32,
         t_max: f32,
     ) -> (u32, [f32; WIDTH]) {
+        let (near, missed) = self.slabs_from::<INTEGER>(&self.offsets::<P>(n), t_min, t_max);
+        (!missed.to_bitmask() & 0xff, near.to_array())
+    }
+
+    /// The offsets from this ray's origin of the children's planes of `n` that its node test
+    /// reads (see [`PlaneOffsets`]).
+    #[inline(always)]
+    pub(super) fn offsets<const P: usize>(&self, n: &Node) -> PlaneOffsets {
         let rows = n.rows();
         // `& 7`: the rows are eight, so the index needs no bounds check.
         let row = |r: u32| f32x8::from(rows[r as usize & 7]);
@@ -304,11 +322,27 @@ impl BoxRay {
             let (_, _, kz) = AXES[P];
             (near_row[kz], far_row[kz]) = slab_rows(kz, (P & 1) as u32);
         }
-        let [nx, ny, nz] = near_row.map(row);
-        let [fx, fy, fz] = far_row.map(row);
+        let o = |k: usize| f32x8::splat(self.origin4.as_array()[k]);
+        PlaneOffsets {
+            near: [0, 1, 2].map(|k| o(k) - row(near_row[k])),
+            far: [0, 1, 2].map(|k| o(k) - row(far_row[k])),
+        }
+    }
+
+    /// The node test of [`BoxRay::slabs`] from the planes' offsets `off` (this ray's, or those
+    /// of a ray with the same origin and the same signs of direction, bit for bit): the
+    /// children's entry distances and the lanes of those the ray misses (all bits set).
+    #[inline(always)]
+    pub(super) fn slabs_from<const INTEGER: bool>(
+        &self,
+        off: &PlaneOffsets,
+        t_min: f32,
+        t_max: f32,
+    ) -> (f32x8, f32x8) {
+        let [dx, dy, dz] = off.near;
+        let [ex, ey, ez] = off.far;
         let s = f32x8::splat;
         let sp = |v: &f32x4, k: usize| f32x8::splat(v.as_array()[k]);
-        let [ox, oy, oz] = [0, 1, 2].map(|k| sp(&self.origin4, k));
         let [ix, iy, iz] = [0, 1, 2].map(|k| sp(&self.neg_inv4, k));
         let [jx, jy, jz] = [0, 1, 2].map(|k| sp(&self.neg_inv_far4, k));
         // Capping the far end at f32::MAX also rejects a ray parallel to a slab it is outside
@@ -328,30 +362,20 @@ impl BoxRay {
             // where one is; so the box is entered exactly when `near <= far` as floats.
             let lo = s(t_min + 0.0);
             let zero = f32x8::ZERO;
-            let far_slab = |o: f32x8, f: f32x8, j: f32x8| (o - f).mul_add(j, zero);
-            let near = imax8(
-                (ox - nx) * ix,
-                imax8((oy - ny) * iy, imax8((oz - nz) * iz, lo)),
-            );
+            let near = imax8(dx * ix, imax8(dy * iy, imax8(dz * iz, lo)));
             let far = imin8(
-                far_slab(ox, fx, jx),
-                imin8(far_slab(oy, fy, jy), imin8(far_slab(oz, fz, jz), hi)),
+                ex.mul_add(jx, zero),
+                imin8(ey.mul_add(jy, zero), imin8(ez.mul_add(jz, zero), hi)),
             );
             let bits = |v: f32x8| -> wide::i32x8 { bytemuck::cast(v) };
-            let missed: f32x8 = bytemuck::cast(bits(near).simd_gt(bits(far)));
-            return (!missed.to_bitmask() & 0xff, near.to_array());
+            return (near, bytemuck::cast(bits(near).simd_gt(bits(far))));
         }
         // Each axis term goes first: a NaN (ray in a slab plane) leaves the interval unbounded
         // on that axis (`fmax8(term, acc)` is `acc` when `term` is NaN).
-        let near = fmax8(
-            (ox - nx) * ix,
-            fmax8((oy - ny) * iy, fmax8((oz - nz) * iz, s(t_min))),
-        );
-        let far = fmin8(
-            (ox - fx) * jx,
-            fmin8((oy - fy) * jy, fmin8((oz - fz) * jz, hi)),
-        );
-        (near.simd_le(far).to_bitmask(), near.to_array())
+        let near = fmax8(dx * ix, fmax8(dy * iy, fmax8(dz * iz, s(t_min))));
+        let far = fmin8(ex * jx, fmin8(ey * jy, fmin8(ez * jz, hi)));
+        let all: f32x8 = bytemuck::cast(u32x8::splat(u32::MAX));
+        (near, near.simd_le(far) ^ all)
     }
 
     /// Whether `1 / direction` is finite on every axis: a walk instantiated for the ray's

@@ -19,10 +19,10 @@ use crate::error::Result;
 use crate::layout::triangles::{Indexed, TriangleSource, Triangles};
 use crate::layout::view::View;
 use crate::layout::{INSTANCE_IDENTITY, InstanceRecord, LEAF_BIT, PrimKind};
-use crate::math::Affine;
+use crate::math::{Affine, Vec3, lanes};
 use ash::vk;
 use std::borrow::Borrow;
-use wide::f32x8;
+use wide::{f32x4, f32x8};
 
 thread_local! {
     static STACKS: std::cell::RefCell<Vec<Vec<Entry>>> = const { std::cell::RefCell::new(Vec::new()) };
@@ -112,8 +112,15 @@ impl<'s> Direct<'s> {
         };
         let common = ray.flags.0 & (CULLING.0 | first_hit | self.skip) == 0
             && self.mask & ray.cull_mask != 0
-            && ray.direction.iter().all(|&c| (1.0 / c).is_finite());
+            && Self::finite_inverse(ray.direction);
         common.then(|| permutation(ray.direction))
+    }
+
+    /// Whether `1 / c` is finite for every component `c` of `dir`, as [`BoxRay`] computes it
+    /// (one division of the three lanes: correctly rounded, so the same bits as three).
+    #[inline(always)]
+    fn finite_inverse(dir: Vec3) -> bool {
+        (f32x4::ONE / lanes(dir)).is_finite().to_bitmask() & 0b111 == 0b111
     }
 
     /// A valid ray's hit, walked on `stack`.
@@ -479,9 +486,10 @@ impl<'s> Tracer<'s> {
     /// Closest hits of `rays` through the scene's only (identity) instance, a bottom level of
     /// triangles, in packets: runs of up to [`packet::PACKET`] consecutive rays of the common
     /// case (no culling or first-hit flags, the instance's mask met, a direction with a finite
-    /// inverse) with one axis permutation, in the batch's order (a camera's rays next to each
-    /// other are the coherent ones). The other rays, and a packet's rays that met a tie, are
-    /// traced one at a time.
+    /// inverse) with one axis permutation, one origin and the same signs of direction
+    /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
+    /// the coherent ones). The other rays, and a packet's rays that met a tie, are traced one
+    /// at a time.
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
@@ -502,7 +510,8 @@ impl<'s> Tracer<'s> {
                 ),
             });
             // Which of two candidates at the same distance the packet found first depends
-            // on its order; the ray's own walk decides.
+            // on its order; the ray's own walk decides. (Rays the packet left alone, not
+            // sharing its origin, none here, come back the same way.)
             for (r, &i) in group.iter().enumerate() {
                 if tied & 1 << r != 0 {
                     if let (Some(ray), Some(h)) = (rays.get(i as usize), hits.get_mut(i as usize)) {
@@ -513,7 +522,7 @@ impl<'s> Tracer<'s> {
             }
         };
         let mut group = [0u32; packet::PACKET];
-        let (mut n, mut group_perm) = (0, 0);
+        let (mut n, mut group_perm, mut last) = (0, 0, None);
         let mut result = Ok(());
         for (i, r) in rays.iter().enumerate() {
             if let Err(e) = r.validate() {
@@ -528,13 +537,16 @@ impl<'s> Tracer<'s> {
                 }
                 continue;
             };
-            if n == packet::PACKET || (n > 0 && perm != group_perm) {
+            // (Sharing a walk with the last ray is sharing it with the group's first.)
+            let joins =
+                n > 0 && perm == group_perm && last.is_some_and(|l| packet::share_a_walk(l, r));
+            if n == packet::PACKET || (n > 0 && !joins) {
                 walk(&group[..n], group_perm, &mut work, hits);
                 n = 0;
             }
             group[n] = i as u32;
             n += 1;
-            group_perm = perm;
+            (group_perm, last) = (perm, Some(r));
         }
         if n > 0 && result.is_ok() {
             walk(&group[..n], group_perm, &mut work, hits);
@@ -1266,6 +1278,56 @@ mod tests {
         for (k, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
             assert_eq!(hit.is_hit(), k < 8);
             assert_eq!(*hit, scene.trace_closest(ray).unwrap());
+        }
+    }
+
+    /// A packet walks only the rays that share its first ray's origin and signs of direction
+    /// (its node test subtracts the planes from that origin once for all) and hands the others
+    /// back, untouched, for the one-ray walk: rays from two points, alternating, given to one
+    /// packet walk.
+    #[test]
+    fn a_packet_hands_back_the_rays_that_do_not_share_its_walk() {
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let device = crate::Device::new();
+        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
+        let blas =
+            crate::quick::build_triangle_blas(&device, &positions, &[[0, 1, 2]], flags).unwrap();
+        let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
+        let scene = device.scene(tlas).unwrap();
+        let mut tracer = Tracer::new(&scene);
+        let d = tracer.direct.as_ref().unwrap();
+        let rays: Vec<Ray> = (0..8)
+            .map(|k| {
+                // Both points above the triangle, the same signs of direction towards it.
+                let origin = if k % 2 == 0 {
+                    [0.9, 0.9, 4.0]
+                } else {
+                    [0.8, 0.9, 4.0]
+                };
+                let at = [0.1 + 0.05 * k as f32, 0.2, 0.0];
+                Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
+            })
+            .collect();
+        let group: Vec<u32> = (0..8).collect();
+        let mut hits = vec![Hit::MISS; 8];
+        let mut work = Packets::new();
+        let flip = false;
+        let back = by_permutation!(permutation(rays[0].direction), P => match d.view.triangles {
+            Triangles::Direct(t) => packet::walk::<P, _>(
+                &d.view, d.inst, t, flip, &rays, &group, &mut work, &mut hits,
+            ),
+            Triangles::Indexed(t) => packet::walk::<P, _>(
+                &d.view, d.inst, t, flip, &rays, &group, &mut work, &mut hits,
+            ),
+        });
+        assert_eq!(back, 0b1010_1010, "the rays from the second point");
+        for (k, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
+            if k % 2 == 0 {
+                assert!(hit.is_hit());
+                assert_eq!(*hit, tracer.closest(ray).unwrap());
+            } else {
+                assert_eq!(*hit, Hit::MISS, "ray {k} left as it was");
+            }
         }
     }
 
