@@ -39,9 +39,14 @@ struct PacketStack {
     t: [f32x8; STACK_CAPACITY],
 }
 
-/// The rays of one packet (at most [`PACKET`]): a packet writes the entries of its rays, and
-/// reads no others.
+/// The rays of one packet (at most [`PACKET`], gathered by [`Packets::gather`]): a packet
+/// writes the entries of its rays, and reads no others.
 struct Packet {
+    /// How many rays it holds, their indices in the batch, their permutation and the first.
+    len: usize,
+    group: [u32; PACKET],
+    perm: usize,
+    lead: Ray,
     boxes: [BoxRay; PACKET],
     sheared: [ShearedRay; PACKET],
     t_min: [f32; PACKET],
@@ -63,6 +68,39 @@ impl Packets {
         &mut self.single
     }
 
+    /// Gathers ray `i` of a batch, `ray` (of the common case: no culling or first-hit flag,
+    /// the instance's mask met, a finite inverse), prepared for the box test as `boxes`, with
+    /// permutation `perm`, into the packet: `false`, gathering nothing, where the packet is
+    /// full or the ray does not share the walk of its first ray (the same permutation and
+    /// [`share_a_walk`]).
+    #[inline(always)]
+    pub(super) fn gather(&mut self, i: u32, ray: &Ray, boxes: &BoxRay, perm: usize) -> bool {
+        let p = &mut self.packet;
+        let n = p.len;
+        if n == 0 {
+            (p.perm, p.lead) = (perm, *ray);
+        } else if n >= PACKET || perm != p.perm || !share_a_walk(&p.lead, ray) {
+            return false;
+        }
+        p.group[n] = i;
+        p.boxes[n] = *boxes;
+        p.t_min[n] = ray.t_min;
+        p.best[n] = Best::miss(ray.t_max);
+        p.len = n + 1;
+        true
+    }
+
+    /// The batch's indices of the rays gathered, and their permutation.
+    pub(super) fn gathered(&self) -> (&[u32], usize) {
+        let p = &self.packet;
+        (p.group.get(..p.len).unwrap_or_default(), p.perm)
+    }
+
+    /// Empties the packet, for the next rays.
+    pub(super) fn clear(&mut self) {
+        self.packet.len = 0;
+    }
+
     pub(super) fn new() -> Box<Packets> {
         let idle = BoxRay::new([0.0; 3], [1.0; 3]);
         Box::new(Packets {
@@ -71,6 +109,10 @@ impl Packets {
                 t: [f32x8::ZERO; STACK_CAPACITY],
             },
             packet: Packet {
+                len: 0,
+                group: [0; PACKET],
+                perm: 0,
+                lead: Ray::new([0.0; 3], [1.0; 3]),
                 boxes: [idle; PACKET],
                 sheared: [ShearedRay::new([0.0; 3], [1.0; 3]); PACKET],
                 t_min: [0.0; PACKET],
@@ -99,12 +141,11 @@ pub(super) fn share_a_walk(a: &Ray, b: &Ray) -> bool {
     (apart(a.origin, b.origin) | (apart(a.direction, b.direction) & 1 << 31)) == 0
 }
 
-/// Walks the rays `group` (at most [`PACKET`] indices into `rays`, every one with
-/// permutation `P` and a finite inverse, as coherent as may be) through the bottom level
-/// `view` of instance `inst`, triangles `tris`, and writes each ray's closest hit to `hits`.
-/// `flip`: the instance flips facing. Returns the rays (bits, in `group`'s order) whose hits
-/// the caller must make by the one-ray walk: those that met a tie, and those that do not
-/// [`share_a_walk`] with the first (which the packet leaves alone).
+/// Walks the rays gathered in `work` (of batch `rays`, with permutation `P`, as coherent as
+/// may be) through the bottom level `view` of instance `inst`, triangles `tris`, and writes
+/// each ray's closest hit to `hits`. `flip`: the instance flips facing. Returns the rays (bits,
+/// in the order gathered) that met a tie, whose hits the caller must make again by the one-ray
+/// walk.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 pub(super) fn walk<const P: usize, T: LeafTriangles>(
@@ -113,7 +154,6 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
     tris: T,
     flip: bool,
     rays: &[Ray],
-    group: &[u32],
     work: &mut Packets,
     hits: &mut [Hit],
 ) -> u32 {
@@ -122,25 +162,13 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
         packet,
         single,
     } = work;
+    let group = packet.group.get(..packet.len).unwrap_or_default();
     // Per ray (-inf past the packet's rays, which then never reach anything).
     let mut limit = [f32::NEG_INFINITY; PACKET];
-    let (mut live, mut apart) = (0u32, 0u32);
-    let lead = group.first().and_then(|&i| rays.get(i as usize));
-    for (r, &i) in group.iter().enumerate().take(PACKET) {
-        let (Some(ray), Some(lead)) = (rays.get(i as usize), lead) else {
-            continue;
-        };
-        if !share_a_walk(lead, ray) {
-            apart |= 1 << r;
-            continue;
-        }
-        let boxes = BoxRay::new(ray.origin, ray.direction);
-        packet.boxes[r] = boxes;
-        packet.t_min[r] = ray.t_min;
-        packet.best[r] = Best::miss(ray.t_max);
-        limit[r] = limit_of(&packet.best[r]);
-        live |= 1 << r;
+    for (l, best) in limit.iter_mut().zip(&packet.best).take(group.len()) {
+        *l = limit_of(best);
     }
+    let live = (1u32 << group.len()) - 1;
     let mut limits = f32x8::from(limit);
     // The rays prepared for the triangle test (when they first reach a leaf: most rays of a
     // camera that miss the structure never do).
@@ -231,7 +259,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     let column =
                         |k: usize| f32x8::from(std::array::from_fn(|r| rows[r].as_array()[k]));
                     let (Some(r), Some(t)) = (stack.refs.get_mut(sp), stack.t.get_mut(sp)) else {
-                        return live | apart;
+                        return live;
                     };
                     *r = (node.child[far], node.count[far] as u32);
                     *t = column(far);
@@ -251,7 +279,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     let (Some(refs), Some(ts)) =
                         (stack.refs.get_mut(sp..sp + n), stack.t.get_mut(sp..sp + n))
                     else {
-                        return live | apart;
+                        return live;
                     };
                     for ((r, t), &k) in refs.iter_mut().zip(ts).zip(order[..n].iter().rev()) {
                         let k = k as usize & 7;
@@ -307,11 +335,11 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                         *h = hit(&packet.best[r], inst, Some(view));
                     }
                 }
-                return tied | apart;
+                return tied;
             }
             sp -= 1;
             let (Some(&r), Some(t)) = (stack.refs.get(sp), stack.t.get(sp)) else {
-                return live | apart;
+                return live;
             };
             let open = t.simd_le(limits).to_bitmask();
             if open != 0 {
@@ -331,6 +359,50 @@ const INF8: f32x8 = f32x8::new([f32::INFINITY; 8]);
 mod tests {
     use super::*;
     use crate::traverse::triangle::{TriangleHit, by_permutation, permutation};
+
+    /// A packet gathers a ray only where it shares the walk of the packet's first ray (its
+    /// node test subtracts the planes from that origin once for all): the same permutation,
+    /// origin and signs of direction, bit for bit; and at most eight.
+    #[test]
+    fn a_packet_gathers_only_rays_that_share_its_walk() {
+        let ray = |o: [f32; 3], d: [f32; 3]| Ray::new(o, d);
+        let (o, d) = ([0.5, 0.5, 4.0], [0.1, -0.2, -1.0]);
+        let others = [
+            ray([0.5, 0.5, 4.5], d),
+            ray([-0.0, 0.5, 4.0], d),
+            ray(o, [-0.1, -0.2, -1.0]),
+            ray(o, [0.1, 0.0, -1.0]),
+        ];
+        let mut work = Packets::new();
+        for other in &others {
+            work.clear();
+            let first = ray(o, d);
+            let gather = |w: &mut Packets, i: u32, r: &Ray| {
+                w.gather(
+                    i,
+                    r,
+                    &BoxRay::new(r.origin, r.direction),
+                    permutation(r.direction),
+                )
+            };
+            assert!(gather(&mut work, 0, &first));
+            assert!(!gather(&mut work, 1, other), "{other:?} is not gathered");
+            // (The same ray, under another permutation: not gathered either.)
+            let p = permutation(d);
+            assert!(!work.gather(1, &first, &BoxRay::new(o, d), (p + 1) % 6));
+            for i in 1..8 {
+                let near = ray(o, [0.1 + 0.01 * i as f32, -0.2, -1.0]);
+                assert!(gather(&mut work, i, &near));
+            }
+            assert!(!gather(&mut work, 8, &first), "full");
+            assert_eq!(work.gathered(), (&[0, 1, 2, 3, 4, 5, 6, 7][..], p));
+        }
+        let origin_zero = [ray([0.0, 0.5, 4.0], d), ray([-0.0, 0.5, 4.0], d)];
+        assert!(
+            !share_a_walk(&origin_zero[0], &origin_zero[1]),
+            "-0 and +0 apart"
+        );
+    }
 
     /// A packet's leaf test (of three triangles: the eight-wide test where the build has AVX,
     /// else the loop) notes a candidate at exactly the hit's distance, found earlier in another

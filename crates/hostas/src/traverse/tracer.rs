@@ -105,15 +105,19 @@ impl<'s> Direct<'s> {
     /// its own.
     #[inline(always)]
     fn common_permutation(&self, ray: &Ray, first_hit_alone: bool) -> Option<usize> {
+        let common = self.common_flags(ray, first_hit_alone) && Self::finite_inverse(ray.direction);
+        common.then(|| permutation(ray.direction))
+    }
+
+    /// [`Direct::common_permutation`]'s test of the ray's flags and mask.
+    #[inline(always)]
+    fn common_flags(&self, ray: &Ray, first_hit_alone: bool) -> bool {
         let first_hit = if first_hit_alone {
             RayFlags::TERMINATE_ON_FIRST_HIT.0
         } else {
             0
         };
-        let common = ray.flags.0 & (CULLING.0 | first_hit | self.skip) == 0
-            && self.mask & ray.cull_mask != 0
-            && Self::finite_inverse(ray.direction);
-        common.then(|| permutation(ray.direction))
+        ray.flags.0 & (CULLING.0 | first_hit | self.skip) == 0 && self.mask & ray.cull_mask != 0
     }
 
     /// Whether `1 / c` is finite for every component `c` of `dir`, as [`BoxRay`] computes it
@@ -500,57 +504,55 @@ impl<'s> Tracer<'s> {
         let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
         let mut work = self.packet_work.take().unwrap_or_else(Packets::new);
         let mut retraced = 0;
-        let mut walk = |group: &[u32], perm: usize, work: &mut Packets, hits: &mut [Hit]| {
+        // Walks the packet gathered and empties it.
+        let mut walk = |work: &mut Packets, hits: &mut [Hit]| {
+            let perm = work.gathered().1;
             let tied = by_permutation!(perm, P => match view.triangles {
-                Triangles::Direct(t) => packet::walk::<P, _>(
-                    &view, inst, t, flip, rays, group, work, hits,
-                ),
-                Triangles::Indexed(t) => packet::walk::<P, _>(
-                    &view, inst, t, flip, rays, group, work, hits,
-                ),
+                Triangles::Direct(t) => packet::walk::<P, _>(&view, inst, t, flip, rays, work, hits),
+                Triangles::Indexed(t) => packet::walk::<P, _>(&view, inst, t, flip, rays, work, hits),
             });
             // Which of two candidates at the same distance the packet found first depends
-            // on its order; the ray's own walk decides. (Rays the packet left alone, not
-            // sharing its origin, none here, come back the same way.)
-            for (r, &i) in group.iter().enumerate() {
-                if tied & 1 << r != 0 {
-                    if let (Some(ray), Some(h)) = (rays.get(i as usize), hits.get_mut(i as usize)) {
-                        *h = d.trace(work.single(), ray, false);
-                        retraced += 1;
-                    }
+            // on its order; the ray's own walk decides.
+            let mut m = tied;
+            while m != 0 {
+                let r = m.trailing_zeros() as usize;
+                m &= m - 1;
+                let Some(&i) = work.gathered().0.get(r) else {
+                    continue;
+                };
+                if let (Some(ray), Some(h)) = (rays.get(i as usize), hits.get_mut(i as usize)) {
+                    *h = d.trace(work.single(), ray, false);
+                    retraced += 1;
                 }
             }
+            work.clear();
         };
-        let mut group = [0u32; packet::PACKET];
-        let (mut n, mut group_perm, mut last) = (0, 0, None);
         let mut result = Ok(());
         for (i, r) in rays.iter().enumerate() {
             if let Err(e) = r.validate() {
                 result = Err(e.in_ray(i));
                 break;
             }
-            let Some(perm) = d.common_permutation(r, true) else {
+            // (The box test's inverse, made once: its finiteness, and the packet's copy.)
+            let boxes = BoxRay::new(r.origin, r.direction);
+            if !(d.common_flags(r, true) && boxes.finite_inverse()) {
                 // (Validated: traced at once, as `Tracer::closest` would.)
                 let first_hit = r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
                 if let Some(h) = hits.get_mut(i) {
                     *h = d.trace(work.single(), r, first_hit);
                 }
                 continue;
-            };
-            // (Sharing a walk with the last ray is sharing it with the group's first.)
-            let joins =
-                n > 0 && perm == group_perm && last.is_some_and(|l| packet::share_a_walk(l, r));
-            if n == packet::PACKET || (n > 0 && !joins) {
-                walk(&group[..n], group_perm, &mut work, hits);
-                n = 0;
             }
-            group[n] = i as u32;
-            n += 1;
-            (group_perm, last) = (perm, Some(r));
+            let perm = permutation(r.direction);
+            if !work.gather(i as u32, r, &boxes, perm) {
+                walk(&mut work, hits);
+                work.gather(i as u32, r, &boxes, perm);
+            }
         }
-        if n > 0 && result.is_ok() {
-            walk(&group[..n], group_perm, &mut work, hits);
+        if result.is_ok() && !work.gathered().0.is_empty() {
+            walk(&mut work, hits);
         }
+        work.clear();
         self.packet_work = Some(work);
         self.retraced += retraced;
         result
@@ -1278,56 +1280,6 @@ mod tests {
         for (k, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
             assert_eq!(hit.is_hit(), k < 8);
             assert_eq!(*hit, scene.trace_closest(ray).unwrap());
-        }
-    }
-
-    /// A packet walks only the rays that share its first ray's origin and signs of direction
-    /// (its node test subtracts the planes from that origin once for all) and hands the others
-    /// back, untouched, for the one-ray walk: rays from two points, alternating, given to one
-    /// packet walk.
-    #[test]
-    fn a_packet_hands_back_the_rays_that_do_not_share_its_walk() {
-        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-        let device = crate::Device::new();
-        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
-        let blas =
-            crate::quick::build_triangle_blas(&device, &positions, &[[0, 1, 2]], flags).unwrap();
-        let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
-        let scene = device.scene(tlas).unwrap();
-        let mut tracer = Tracer::new(&scene);
-        let d = tracer.direct.as_ref().unwrap();
-        let rays: Vec<Ray> = (0..8)
-            .map(|k| {
-                // Both points above the triangle, the same signs of direction towards it.
-                let origin = if k % 2 == 0 {
-                    [0.9, 0.9, 4.0]
-                } else {
-                    [0.8, 0.9, 4.0]
-                };
-                let at = [0.1 + 0.05 * k as f32, 0.2, 0.0];
-                Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
-            })
-            .collect();
-        let group: Vec<u32> = (0..8).collect();
-        let mut hits = vec![Hit::MISS; 8];
-        let mut work = Packets::new();
-        let flip = false;
-        let back = by_permutation!(permutation(rays[0].direction), P => match d.view.triangles {
-            Triangles::Direct(t) => packet::walk::<P, _>(
-                &d.view, d.inst, t, flip, &rays, &group, &mut work, &mut hits,
-            ),
-            Triangles::Indexed(t) => packet::walk::<P, _>(
-                &d.view, d.inst, t, flip, &rays, &group, &mut work, &mut hits,
-            ),
-        });
-        assert_eq!(back, 0b1010_1010, "the rays from the second point");
-        for (k, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
-            if k % 2 == 0 {
-                assert!(hit.is_hit());
-                assert_eq!(*hit, tracer.closest(ray).unwrap());
-            } else {
-                assert_eq!(*hit, Hit::MISS, "ray {k} left as it was");
-            }
         }
     }
 
