@@ -22,11 +22,12 @@
 use super::Ray;
 use super::query::{BoxRay, Entry, STACK_CAPACITY, nearest_first, prune_limit};
 use super::scene::Hit;
-use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, trace_blas};
+use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, take, trace_blas};
 use super::triangle::ShearedRay;
 use crate::layout::view::View;
 use crate::layout::{InstanceRecord, LEAF_BIT};
 use crate::math::INTEGER_MIN_MAX;
+use std::borrow::Borrow;
 use wide::f32x8;
 
 /// Rays walked together.
@@ -302,26 +303,44 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 fresh &= fresh - 1;
                 packet.sheared[r] = packet.boxes[r].sheared::<P>();
             }
-            let mut m = rays_in;
-            let mut accepted = false;
-            while m != 0 {
-                let r = m.trailing_zeros() as usize & (PACKET - 1);
-                m &= m - 1;
-                let best = &mut packet.best[r];
-                if leaf::<P, T, false, true>(
-                    tris,
-                    flip,
-                    &packet.sheared[r],
-                    packet.t_min[r],
-                    best,
-                    first,
-                    count,
-                ) {
-                    limit[r] = limit_of(best);
-                    accepted = true;
+            let mut accepted = 0u32;
+            if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+                let mut m = rays_in;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize & (PACKET - 1);
+                    m &= m - 1;
+                    let best = &mut packet.best[r];
+                    let (sheared, t_min) = (&packet.sheared[r], packet.t_min[r]);
+                    if leaf::<P, T, false, true>(tris, flip, sheared, t_min, best, first, count) {
+                        accepted |= 1 << r;
+                    }
+                }
+            } else {
+                // Triangle by triangle, each fetched (an indexed one gathered) once for all
+                // the rays; each ray still tests them in the leaf's order, as alone.
+                for (p, tri) in (first..).zip(tris.leaf(first as usize, count as usize)) {
+                    let tri = tri.borrow();
+                    let mut m = rays_in;
+                    while m != 0 {
+                        let r = m.trailing_zeros() as usize & (PACKET - 1);
+                        m &= m - 1;
+                        let Some(h) = T::intersect::<P>(&packet.sheared[r], tri) else {
+                            continue;
+                        };
+                        let best = &mut packet.best[r];
+                        if take::<true>(best, packet.t_min[r], p, &h, flip) {
+                            accepted |= 1 << r;
+                        }
+                    }
                 }
             }
-            if accepted {
+            if accepted != 0 {
+                let mut m = accepted;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize & (PACKET - 1);
+                    m &= m - 1;
+                    limit[r] = limit_of(&packet.best[r]);
+                }
                 limits = f32x8::from(limit);
             }
         }

@@ -875,9 +875,7 @@ pub(super) fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool, const TI
         let Some(h) = T::intersect::<P>(sheared, tri.borrow()) else {
             continue;
         };
-        let bound = if TIES { best.tie_bound() } else { best.t };
-        if h.t > t_min && h.t < bound && !(TIES && best.ties(h.t)) {
-            best.accept_triangle(p, &h, h.front_face != flip);
+        if take::<TIES>(best, t_min, p, &h, flip) {
             found = true;
             if FIRST {
                 break;
@@ -885,6 +883,25 @@ pub(super) fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool, const TI
         }
     }
     found
+}
+
+/// Takes hit `h` on triangle `p` (of an instance that flips facing where `flip`) as `best`
+/// where it lies in range and nearer, with no culling: whether it was taken. With `TIES` a
+/// candidate at exactly the hit's distance is noted ([`Best::ties`]), not taken.
+#[inline(always)]
+pub(super) fn take<const TIES: bool>(
+    best: &mut Best,
+    t_min: f32,
+    p: u32,
+    h: &TriangleHit,
+    flip: bool,
+) -> bool {
+    let bound = if TIES { best.tie_bound() } else { best.t };
+    if h.t > t_min && h.t < bound && !(TIES && best.ties(h.t)) {
+        best.accept_triangle(p, h, h.front_face != flip);
+        return true;
+    }
+    false
 }
 
 /// The loop of [`LeafTriangles::nearest`] over `tris` one at a time (offsets from `base`).
