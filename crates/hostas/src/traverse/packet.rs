@@ -22,7 +22,9 @@
 use super::Ray;
 use super::query::{BoxRay, Entry, STACK_CAPACITY, nearest_first, prune_limit};
 use super::scene::Hit;
-use super::tracer::{Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, take, trace_blas};
+use super::tracer::{
+    Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, take, take_nearest, trace_blas,
+};
 use super::triangle::ShearedRay;
 use crate::layout::view::View;
 use crate::layout::{InstanceRecord, LEAF_BIT};
@@ -304,7 +306,25 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 packet.sheared[r] = packet.boxes[r].sheared::<P>();
             }
             let mut accepted = 0u32;
-            if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+            let ready = if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+                tris.ready(first as usize, count as usize)
+            } else {
+                None
+            };
+            if let Some(ready) = ready {
+                // (A leaf of up to eight direct triangles, transposed once for all the rays.)
+                let mut m = rays_in;
+                while m != 0 {
+                    let r = m.trailing_zeros() as usize & (PACKET - 1);
+                    m &= m - 1;
+                    let best = &mut packet.best[r];
+                    let (sheared, t_min) = (&packet.sheared[r], packet.t_min[r]);
+                    let found = tris.nearest_ready::<P>(&ready, sheared, t_min, best.tie_bound());
+                    if take_nearest::<true>(best, found, first, flip) {
+                        accepted |= 1 << r;
+                    }
+                }
+            } else if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
                 let mut m = rays_in;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize & (PACKET - 1);

@@ -839,6 +839,23 @@ pub(super) trait LeafTriangles: TriangleSource {
     ) -> Option<(u32, TriangleHit)> {
         None
     }
+    /// A leaf of [`LeafTriangles::NEAREST_FROM`] to eight triangles as
+    /// [`LeafTriangles::nearest`] reads it, made once for the rays of a packet.
+    type Ready;
+    /// The `count` triangles from `first` made ready (`None`: not made, or out of range).
+    fn ready(&self, _first: usize, _count: usize) -> Option<Self::Ready> {
+        None
+    }
+    /// [`LeafTriangles::nearest`] (closest hits) over the leaf made ready.
+    fn nearest_ready<const P: usize>(
+        &self,
+        _leaf: &Self::Ready,
+        _ray: &ShearedRay,
+        _t_min: f32,
+        _t_max: f32,
+    ) -> Option<(u32, TriangleHit)> {
+        None
+    }
 }
 
 /// The triangles of leaf `first`, `count` tested by one ray with no culling, as the one-ray
@@ -859,16 +876,8 @@ pub(super) fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool, const TI
 ) -> bool {
     if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
         let bound = if TIES { best.tie_bound() } else { best.t };
-        let Some((k, h)) =
-            tris.nearest::<P, FIRST>(sheared, first as usize, count as usize, t_min, bound)
-        else {
-            return false;
-        };
-        if TIES && best.ties(h.t) {
-            return false;
-        }
-        best.accept_triangle(first + k, &h, h.front_face != flip);
-        return true;
+        let found = tris.nearest::<P, FIRST>(sheared, first as usize, count as usize, t_min, bound);
+        return take_nearest::<TIES>(best, found, first, flip);
     }
     let mut found = false;
     for (p, tri) in (first..).zip(tris.leaf(first as usize, count as usize)) {
@@ -883,6 +892,26 @@ pub(super) fn leaf<const P: usize, T: LeafTriangles, const FIRST: bool, const TI
         }
     }
     found
+}
+
+/// Takes the hit `found` of [`LeafTriangles::nearest`] in the leaf from triangle `first`
+/// (searched below `best.t`, or with `TIES` below [`Best::tie_bound`]) as `best`, as
+/// [`take`] does: whether it was taken.
+#[inline(always)]
+pub(super) fn take_nearest<const TIES: bool>(
+    best: &mut Best,
+    found: Option<(u32, TriangleHit)>,
+    first: u32,
+    flip: bool,
+) -> bool {
+    let Some((k, h)) = found else {
+        return false;
+    };
+    if TIES && best.ties(h.t) {
+        return false;
+    }
+    best.accept_triangle(first + k, &h, h.front_face != flip);
+    true
 }
 
 /// Takes hit `h` on triangle `p` (of an instance that flips facing where `flip`) as `best`
@@ -951,13 +980,10 @@ impl LeafTriangles for &[[f32; 9]] {
         u32::MAX
     };
 
-    /// Eight triangles at a time ([`ShearedRay::edges8`], then
-    /// [`Edges8::hits`](super::triangle::Edges8::hits) for a chunk with a covered lane): each
-    /// triangle's first eight floats are one load and one 8x8 transpose makes them rows. Lanes
-    /// past the leaf repeat its last triangle, whose copies can never be accepted before it;
-    /// the eight slots from the chunk's first are bounds-checked at once (a chunk at the end
-    /// of the triangles is copied and padded). A chunk with an edge function exactly zero in
-    /// one of its lanes is tested one triangle at a time.
+    /// Eight triangles at a time ([`Chunk8`], [`ShearedRay::edges8`], then
+    /// [`Edges8::hits`](super::triangle::Edges8::hits) for a chunk with a covered lane). A
+    /// chunk with an edge function exactly zero in one of its lanes is tested one triangle at
+    /// a time.
     #[inline(always)]
     fn nearest<const P: usize, const FIRST: bool>(
         &self,
@@ -972,73 +998,128 @@ impl LeafTriangles for &[[f32; 9]] {
         let mut base = 0;
         while base < count {
             let n = (count - base).min(8);
-            let lanes = (1u32 << n) - 1;
-            let at = first + base;
-            let padded;
-            let window: &[[f32; 9]; 8] = match self.get(at..at + 8).and_then(|w| w.try_into().ok())
-            {
-                Some(w) => w,
-                None => {
-                    padded = pad8(self.get(at..at + n)?);
-                    &padded
-                }
-            };
-            // Lanes past the leaf repeat its last triangle, so that no load leaves the leaf's
-            // lines: reading the next leaves' slots took 6% fewer instructions but up to three
-            // more lines per leaf (the same speed on one thread on the Xeon; traffic that all
-            // threads tracing at once would share).
-            let tri = |j: usize| &window[(if j < n { j } else { n - 1 }) & 7];
-            let head: [f32x8; 8] = std::array::from_fn(|j| {
-                let h: [f32; 8] = bytemuck::cast_slice::<f32, [f32; 8]>(&tri(j)[..8])[0];
-                f32x8::from(h)
-            });
-            let [r0, r1, r2, r3, r4, r5, r6, r7] = f32x8::transpose(head);
-            let r8 = f32x8::from(std::array::from_fn::<f32, 8, _>(|j| tri(j)[8]));
-            let edges = ray.edges8::<P>(&[r0, r1, r2, r3, r4, r5, r6, r7, r8]);
-            let k = base as u32;
-            base += 8;
-            if edges.edge & lanes != 0 {
-                let chunk = self.get(at..at + n)?;
-                nearest_one_by_one::<P, FIRST>(ray, chunk, k, t_min, &mut t_max, &mut best);
-                if FIRST && best.is_some() {
-                    return best;
-                }
-                continue;
-            }
-            if edges.covered & lanes == 0 {
-                continue;
-            }
-            let hits = edges.hits(ray);
-            let t = hits.t;
-            let range = t.simd_gt(f32x8::splat(t_min)) & t.simd_lt(f32x8::splat(t_max));
-            let in_range = hits.hit & lanes & range.to_bitmask();
-            if in_range == 0 {
-                continue;
-            }
-            let lane = if FIRST {
-                in_range.trailing_zeros()
-            } else {
-                // The least `t` among the lanes in range, its first lane on a tie.
-                let ts = t.to_array();
-                let mut m = in_range & (in_range - 1);
-                let mut lane = in_range.trailing_zeros();
-                while m != 0 {
-                    let j = m.trailing_zeros();
-                    if ts[j as usize & 7] < ts[lane as usize & 7] {
-                        lane = j;
-                    }
-                    m &= m - 1;
-                }
-                lane
-            };
-            let h = hits.lane(lane as usize);
-            t_max = h.t;
-            best = Some((k + lane, h));
-            if FIRST {
+            let chunk = Chunk8::new(self, first + base, n)?;
+            chunk.nearest::<P, FIRST>(self, ray, base as u32, t_min, &mut t_max, &mut best)?;
+            if FIRST && best.is_some() {
                 return best;
             }
+            base += 8;
         }
         best
+    }
+
+    type Ready = Chunk8;
+    #[inline(always)]
+    fn ready(&self, first: usize, count: usize) -> Option<Chunk8> {
+        (1..=8)
+            .contains(&count)
+            .then(|| Chunk8::new(self, first, count))?
+    }
+    #[inline(always)]
+    fn nearest_ready<const P: usize>(
+        &self,
+        leaf: &Chunk8,
+        ray: &ShearedRay,
+        t_min: f32,
+        t_max: f32,
+    ) -> Option<(u32, TriangleHit)> {
+        let (mut t_max, mut best) = (t_max, None);
+        leaf.nearest::<P, false>(self, ray, 0, t_min, &mut t_max, &mut best)?;
+        best
+    }
+}
+
+/// Up to eight direct triangles from slot `at` as the eight-lane test reads them: each
+/// triangle's first eight floats are one load and one 8x8 transpose makes them rows. Lanes
+/// past the `n` triangles repeat the last, whose copies can never be accepted before it; the
+/// eight slots from `at` are bounds-checked at once (a chunk at the end of the triangles is
+/// copied and padded).
+pub(super) struct Chunk8 {
+    rows: [f32x8; 9],
+    at: usize,
+    n: usize,
+}
+
+impl Chunk8 {
+    #[inline(always)]
+    fn new(tris: &[[f32; 9]], at: usize, n: usize) -> Option<Chunk8> {
+        let padded;
+        let window: &[[f32; 9]; 8] = match tris.get(at..at + 8).and_then(|w| w.try_into().ok()) {
+            Some(w) => w,
+            None => {
+                padded = pad8(tris.get(at..at + n)?);
+                &padded
+            }
+        };
+        // Lanes past the leaf repeat its last triangle, so that no load leaves the leaf's
+        // lines: reading the next leaves' slots took 6% fewer instructions but up to three
+        // more lines per leaf (the same speed on one thread on the Xeon; traffic that all
+        // threads tracing at once would share).
+        let tri = |j: usize| &window[(if j < n { j } else { n - 1 }) & 7];
+        let head: [f32x8; 8] = std::array::from_fn(|j| {
+            let h: [f32; 8] = bytemuck::cast_slice::<f32, [f32; 8]>(&tri(j)[..8])[0];
+            f32x8::from(h)
+        });
+        let [r0, r1, r2, r3, r4, r5, r6, r7] = f32x8::transpose(head);
+        let r8 = f32x8::from(std::array::from_fn::<f32, 8, _>(|j| tri(j)[8]));
+        Some(Chunk8 {
+            rows: [r0, r1, r2, r3, r4, r5, r6, r7, r8],
+            at,
+            n,
+        })
+    }
+
+    /// The chunk's part of [`LeafTriangles::nearest`] for `ray` (of the triangles `tris`),
+    /// offsets from `k`: `best` and `t_max` updated where it holds a hit in range nearer than
+    /// `t_max`. `None` where the chunk lies out of range.
+    #[inline(always)]
+    fn nearest<const P: usize, const FIRST: bool>(
+        &self,
+        tris: &[[f32; 9]],
+        ray: &ShearedRay,
+        k: u32,
+        t_min: f32,
+        t_max: &mut f32,
+        best: &mut Option<(u32, TriangleHit)>,
+    ) -> Option<()> {
+        let (at, n) = (self.at, self.n);
+        let lanes = (1u32 << n) - 1;
+        let edges = ray.edges8::<P>(&self.rows);
+        if edges.edge & lanes != 0 {
+            let chunk = tris.get(at..at + n)?;
+            nearest_one_by_one::<P, FIRST>(ray, chunk, k, t_min, t_max, best);
+            return Some(());
+        }
+        if edges.covered & lanes == 0 {
+            return Some(());
+        }
+        let hits = edges.hits(ray);
+        let t = hits.t;
+        let range = t.simd_gt(f32x8::splat(t_min)) & t.simd_lt(f32x8::splat(*t_max));
+        let in_range = hits.hit & lanes & range.to_bitmask();
+        if in_range == 0 {
+            return Some(());
+        }
+        let lane = if FIRST {
+            in_range.trailing_zeros()
+        } else {
+            // The least `t` among the lanes in range, its first lane on a tie.
+            let ts = t.to_array();
+            let mut m = in_range & (in_range - 1);
+            let mut lane = in_range.trailing_zeros();
+            while m != 0 {
+                let j = m.trailing_zeros();
+                if ts[j as usize & 7] < ts[lane as usize & 7] {
+                    lane = j;
+                }
+                m &= m - 1;
+            }
+            lane
+        };
+        let h = hits.lane(lane as usize);
+        *t_max = h.t;
+        *best = Some((k + lane, h));
+        Some(())
     }
 }
 
@@ -1053,6 +1134,7 @@ fn pad8(tris: &[[f32; 9]]) -> [[f32; 9]; 8] {
 
 impl LeafTriangles for Indexed<'_> {
     type Tri = [f32; 12];
+    type Ready = ();
     #[inline(always)]
     fn leaf(&self, first: usize, count: usize) -> impl Iterator<Item = impl Borrow<[f32; 12]>> {
         self.leaf_rows(first, count)
