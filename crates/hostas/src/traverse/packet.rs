@@ -4,9 +4,9 @@
 //! them: the node test's subtractions are made once per node ([`BoxRay::offsets`]), and each
 //! ray that reached the node finishes its own test from them (bit for bit the one-ray walk's).
 //! The children any ray reaches are ordered and pushed once for all, each with the set of
-//! rays that reach it. A leaf is tested by each of its rays. What a ray alone would pay per
-//! node beyond its box test (ordering the children, pushing and popping them) the packet pays
-//! once.
+//! rays that reach it. A leaf's triangles are fetched once and tested by each of its rays, in
+//! the leaf's order. What a ray alone would pay per node beyond its box test (ordering the
+//! children, pushing and popping them) the packet pays once.
 //!
 //! The packet visits nodes in another order than one ray alone, and where two candidates lie
 //! at exactly the nearest distance, which of them is the hit depends on the order. The packet
@@ -306,7 +306,8 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 packet.sheared[r] = packet.boxes[r].sheared::<P>();
             }
             let mut accepted = 0u32;
-            let ready = if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+            let eight_wide = T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM;
+            let ready = if eight_wide {
                 tris.ready(first as usize, count as usize)
             } else {
                 None
@@ -324,7 +325,8 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                         accepted |= 1 << r;
                     }
                 }
-            } else if T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM {
+            } else if eight_wide {
+                // (More than eight: each ray alone, chunk by chunk.)
                 let mut m = rays_in;
                 while m != 0 {
                     let r = m.trailing_zeros() as usize & (PACKET - 1);

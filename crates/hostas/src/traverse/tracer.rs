@@ -546,6 +546,7 @@ impl<'s> Tracer<'s> {
             let perm = permutation(r.direction);
             if !work.gather(i as u32, r, &boxes, perm) {
                 walk(&mut work, hits);
+                // (An empty packet takes any ray.)
                 work.gather(i as u32, r, &boxes, perm);
             }
         }
