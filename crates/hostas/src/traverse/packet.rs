@@ -312,6 +312,8 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
             } else {
                 None
             };
+            // (The two eight-wide loops apart: one loop choosing per ray took the soup's
+            // packets 2% more instructions.)
             if let Some(ready) = ready {
                 // (A leaf of up to eight direct triangles, transposed once for all the rays.)
                 let mut m = rays_in;
