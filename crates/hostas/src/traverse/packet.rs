@@ -56,6 +56,16 @@ struct Packet {
     best: [Best; PACKET],
 }
 
+/// What [`Packets::gather`] did with a ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Gather {
+    Taken,
+    /// Not gathered: the packet is full or walks apart from it (walk it, then gather again).
+    Apart,
+    /// Not gathered: a ray for the one-ray walk.
+    Alone,
+}
+
 /// What a packet walk works in, made once per [`Tracer`](super::Tracer) (about 30 KiB: made
 /// per batch, zeroing it cost more than a tenth of a sphere's primary rays' instructions).
 pub(super) struct Packets {
@@ -71,26 +81,33 @@ impl Packets {
         &mut self.single
     }
 
-    /// Gathers ray `i` of a batch, `ray` (of the common case: no culling or first-hit flag,
-    /// the instance's mask met, a finite inverse), prepared for the box test as `boxes`, with
-    /// permutation `perm`, into the packet: `false`, gathering nothing, where the packet is
+    /// Gathers ray `i` of a batch, `ray` (no culling or first-hit flag, the instance's mask
+    /// met), with permutation `perm`, into the packet, prepared for the box test in its slot
+    /// (made there, not copied). [`Gather::Apart`], gathering nothing, where the packet is
     /// full or the ray does not share the walk of its first ray (the same permutation and
-    /// [`share_a_walk`]).
+    /// [`share_a_walk`]); [`Gather::Alone`] for a direction whose inverse is not finite.
     #[inline(always)]
-    pub(super) fn gather(&mut self, i: u32, ray: &Ray, boxes: &BoxRay, perm: usize) -> bool {
+    pub(super) fn gather(&mut self, i: u32, ray: &Ray, perm: usize) -> Gather {
         let p = &mut self.packet;
         let n = p.len;
+        if n > 0 && (n >= PACKET || perm != p.perm || !share_a_walk(&p.lead, ray)) {
+            return Gather::Apart;
+        }
+        let Some(boxes) = p.boxes.get_mut(n) else {
+            return Gather::Apart;
+        };
+        *boxes = BoxRay::new(ray.origin, ray.direction);
+        if !boxes.finite_inverse() {
+            return Gather::Alone;
+        }
         if n == 0 {
             (p.perm, p.lead) = (perm, *ray);
-        } else if n >= PACKET || perm != p.perm || !share_a_walk(&p.lead, ray) {
-            return false;
         }
         p.group[n] = i;
-        p.boxes[n] = *boxes;
         p.t_min[n] = ray.t_min;
         p.best[n] = Best::miss(ray.t_max);
         p.len = n + 1;
-        true
+        Gather::Taken
     }
 
     /// The batch's indices of the rays gathered, and their permutation.
@@ -421,18 +438,13 @@ mod tests {
             work.clear();
             let first = ray(o, d);
             let gather = |w: &mut Packets, i: u32, r: &Ray| {
-                w.gather(
-                    i,
-                    r,
-                    &BoxRay::new(r.origin, r.direction),
-                    permutation(r.direction),
-                )
+                w.gather(i, r, permutation(r.direction)) == Gather::Taken
             };
             assert!(gather(&mut work, 0, &first));
             assert!(!gather(&mut work, 1, other), "{other:?} is not gathered");
             // (The same ray, under another permutation: not gathered either.)
             let p = permutation(d);
-            assert!(!work.gather(1, &first, &BoxRay::new(o, d), (p + 1) % 6));
+            assert_eq!(work.gather(1, &first, (p + 1) % 6), Gather::Apart);
             for i in 1..8 {
                 let near = ray(o, [0.1 + 0.01 * i as f32, -0.2, -1.0]);
                 assert!(gather(&mut work, i, &near));
@@ -440,6 +452,14 @@ mod tests {
             assert!(!gather(&mut work, 8, &first), "full");
             assert_eq!(work.gathered(), (&[0, 1, 2, 3, 4, 5, 6, 7][..], p));
         }
+        // A zero component (an infinite inverse) goes alone, gathering nothing.
+        work.clear();
+        let flat = ray(o, [0.1, 0.0, -1.0]);
+        assert_eq!(
+            work.gather(0, &flat, permutation(flat.direction)),
+            Gather::Alone
+        );
+        assert_eq!(work.gathered().0.len(), 0);
         let origin_zero = [ray([0.0, 0.5, 4.0], d), ray([-0.0, 0.5, 4.0], d)];
         assert!(
             !share_a_walk(&origin_zero[0], &origin_zero[1]),

@@ -533,21 +533,22 @@ impl<'s> Tracer<'s> {
                 result = Err(e.in_ray(i));
                 break;
             }
-            // (The box test's inverse, made once: its finiteness, and the packet's copy.)
-            let boxes = BoxRay::new(r.origin, r.direction);
-            if !(d.common_flags(r, true) && boxes.finite_inverse()) {
+            let mut gathered = packet::Gather::Alone;
+            if d.common_flags(r, true) {
+                let perm = permutation(r.direction);
+                gathered = work.gather(i as u32, r, perm);
+                if gathered == packet::Gather::Apart {
+                    walk(&mut work, hits);
+                    // (An empty packet takes any ray with a finite inverse.)
+                    gathered = work.gather(i as u32, r, perm);
+                }
+            }
+            if gathered != packet::Gather::Taken {
                 // (Validated: traced at once, as `Tracer::closest` would.)
                 let first_hit = r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
                 if let Some(h) = hits.get_mut(i) {
                     *h = d.trace(work.single(), r, first_hit);
                 }
-                continue;
-            }
-            let perm = permutation(r.direction);
-            if !work.gather(i as u32, r, &boxes, perm) {
-                walk(&mut work, hits);
-                // (An empty packet takes any ray.)
-                work.gather(i as u32, r, &boxes, perm);
             }
         }
         if result.is_ok() && !work.gathered().0.is_empty() {
