@@ -200,10 +200,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
     loop {
         if rays_in.count_ones() < ALONE_BELOW {
             // Too few rays left for the packet's work to pay: each walks the subtree alone.
-            let mut m = rays_in;
-            while m != 0 {
-                let r = m.trailing_zeros() as usize & (PACKET - 1);
-                m &= m - 1;
+            for r in each(rays_in) {
                 let Some(ray) = group.get(r).and_then(|&i| rays.get(i as usize)) else {
                     continue;
                 };
@@ -241,10 +238,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 let (mut reached, mut reaching) = (0u32, 0u32);
                 let mut rows = [INF8; PACKET];
                 let mut near = INF8;
-                let mut m = rays_in;
-                while m != 0 {
-                    let r = m.trailing_zeros() as usize & (PACKET - 1);
-                    m &= m - 1;
+                for r in each(rays_in) {
                     let (t, missed) = packet.boxes[r].slabs_from::<INTEGER_MIN_MAX>(
                         &offsets,
                         packet.t_min[r],
@@ -315,13 +309,10 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
             }
         } else {
             let first = child & !LEAF_BIT;
-            let mut fresh = rays_in & !sheared;
-            sheared |= fresh;
-            while fresh != 0 {
-                let r = fresh.trailing_zeros() as usize & (PACKET - 1);
-                fresh &= fresh - 1;
+            for r in each(rays_in & !sheared) {
                 packet.sheared[r] = packet.boxes[r].sheared::<P>();
             }
+            sheared |= rays_in;
             let mut accepted = 0u32;
             let eight_wide = T::NEAREST_FROM != u32::MAX && count >= T::NEAREST_FROM;
             let ready = if eight_wide {
@@ -333,10 +324,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
             // packets 2% more instructions.)
             if let Some(ready) = ready {
                 // (A leaf of up to eight direct triangles, transposed once for all the rays.)
-                let mut m = rays_in;
-                while m != 0 {
-                    let r = m.trailing_zeros() as usize & (PACKET - 1);
-                    m &= m - 1;
+                for r in each(rays_in) {
                     let best = &mut packet.best[r];
                     let (sheared, t_min) = (&packet.sheared[r], packet.t_min[r]);
                     let found = tris.nearest_ready::<P>(&ready, sheared, t_min, best.tie_bound());
@@ -346,10 +334,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 }
             } else if eight_wide {
                 // (More than eight: each ray alone, chunk by chunk.)
-                let mut m = rays_in;
-                while m != 0 {
-                    let r = m.trailing_zeros() as usize & (PACKET - 1);
-                    m &= m - 1;
+                for r in each(rays_in) {
                     let best = &mut packet.best[r];
                     let (sheared, t_min) = (&packet.sheared[r], packet.t_min[r]);
                     if leaf::<P, T, false, true>(tris, flip, sheared, t_min, best, first, count) {
@@ -361,10 +346,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 // the rays; each ray still tests them in the leaf's order, as alone.
                 for (p, tri) in (first..).zip(tris.leaf(first as usize, count as usize)) {
                     let tri = tri.borrow();
-                    let mut m = rays_in;
-                    while m != 0 {
-                        let r = m.trailing_zeros() as usize & (PACKET - 1);
-                        m &= m - 1;
+                    for r in each(rays_in) {
                         let Some(h) = T::intersect::<P>(&packet.sheared[r], tri) else {
                             continue;
                         };
@@ -376,10 +358,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                 }
             }
             if accepted != 0 {
-                let mut m = accepted;
-                while m != 0 {
-                    let r = m.trailing_zeros() as usize & (PACKET - 1);
-                    m &= m - 1;
+                for r in each(accepted) {
                     limit[r] = limit_of(&packet.best[r]);
                 }
                 limits = f32x8::from(limit);
@@ -408,6 +387,18 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
             }
         }
     }
+}
+
+/// The packet's rays whose bits `mask` sets, lowest first.
+#[inline(always)]
+pub(super) fn each(mut mask: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (mask != 0).then(|| {
+            let r = mask.trailing_zeros() as usize & (PACKET - 1);
+            mask &= mask - 1;
+            r
+        })
+    })
 }
 
 /// Fewer rays than this reaching a node walk its subtree one at a time.

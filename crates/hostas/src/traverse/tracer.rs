@@ -513,10 +513,7 @@ impl<'s> Tracer<'s> {
             });
             // Which of two candidates at the same distance the packet found first depends
             // on its order; the ray's own walk decides.
-            let mut m = tied;
-            while m != 0 {
-                let r = m.trailing_zeros() as usize;
-                m &= m - 1;
+            for r in packet::each(tied) {
                 let Some(&i) = work.gathered().0.get(r) else {
                     continue;
                 };
