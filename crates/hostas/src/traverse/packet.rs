@@ -161,11 +161,41 @@ pub(super) fn share_a_walk(a: &Ray, b: &Ray) -> bool {
     (apart(a.origin, b.origin) | (apart(a.direction, b.direction) & 1 << 31)) == 0
 }
 
+/// What a packet's walk did: the rays that met a tie, and how the packet held together.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Walked {
+    /// The rays (bits, in the order gathered) that met a tie, whose hits the caller must make
+    /// again by the one-ray walk.
+    pub tied: u32,
+    /// Rays that reached a leaf together with another ray of the packet.
+    pub at_leaves: u32,
+    /// Subtrees a ray walked alone, the packet having fallen apart above them.
+    pub alone: u32,
+}
+
+impl Walked {
+    /// Adds `other`'s counts to these (the ties are a packet's own: not added).
+    pub(super) fn add(&mut self, other: &Walked) {
+        self.at_leaves += other.at_leaves;
+        self.alone += other.alone;
+    }
+}
+
+/// Rays of a batch that [`Interleave::Auto`](super::Interleave::Auto) walks in packets before
+/// it judges whether packets pay for the rest ([`fell_apart`]).
+pub(super) const PROBE: usize = 128;
+
+/// Whether packets, as walked so far (`w`), mostly fell apart before their leaves: their rays
+/// walked subtrees alone more than eight times as often as they reached a leaf together.
+/// Such rays share only the upper nodes, where the packet's own work (its rays' entries per
+/// child) costs more than what it shares.
+pub(super) fn fell_apart(w: &Walked) -> bool {
+    w.alone >= 16 && w.at_leaves.saturating_mul(8) < w.alone
+}
+
 /// Walks the rays gathered in `work` (of batch `rays`, with permutation `P`, as coherent as
 /// may be) through the bottom level `view` of instance `inst`, triangles `tris`, and writes
-/// each ray's closest hit to `hits`. `flip`: the instance flips facing. Returns the rays (bits,
-/// in the order gathered) that met a tie, whose hits the caller must make again by the one-ray
-/// walk.
+/// each ray's closest hit to `hits`. `flip`: the instance flips facing.
 #[allow(clippy::too_many_arguments)]
 #[inline(never)]
 pub(super) fn walk<const P: usize, T: LeafTriangles>(
@@ -176,7 +206,7 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
     rays: &[Ray],
     work: &mut Packets,
     hits: &mut [Hit],
-) -> u32 {
+) -> Walked {
     let Packets {
         stack,
         packet,
@@ -197,8 +227,10 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
     let mut sp = 0usize;
     let nodes = view.nodes;
     let at = BlasAt { view, inst };
+    let mut walked = Walked::default();
     loop {
         if rays_in.count_ones() < ALONE_BELOW {
+            walked.alone += rays_in.count_ones();
             // Too few rays left for the packet's work to pay: each walks the subtree alone.
             for r in each(rays_in) {
                 let Some(ray) = group.get(r).and_then(|&i| rays.get(i as usize)) else {
@@ -273,7 +305,10 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     let column =
                         |k: usize| f32x8::from(std::array::from_fn(|r| rows[r].as_array()[k]));
                     let (Some(r), Some(t)) = (stack.refs.get_mut(sp), stack.t.get_mut(sp)) else {
-                        return live;
+                        return Walked {
+                            tied: live,
+                            ..walked
+                        };
                     };
                     *r = (node.child[far], node.count[far] as u32);
                     *t = column(far);
@@ -293,7 +328,10 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
                     let (Some(refs), Some(ts)) =
                         (stack.refs.get_mut(sp..sp + n), stack.t.get_mut(sp..sp + n))
                     else {
-                        return live;
+                        return Walked {
+                            tied: live,
+                            ..walked
+                        };
                     };
                     for ((r, t), &k) in refs.iter_mut().zip(ts).zip(order[..n].iter().rev()) {
                         let k = k as usize & 7;
@@ -367,18 +405,21 @@ pub(super) fn walk<const P: usize, T: LeafTriangles>(
         // The nearest entry that some of its rays may still find a nearer hit in.
         loop {
             if sp == 0 {
-                let mut tied = 0;
+                walked.at_leaves = sheared.count_ones();
                 for (r, &i) in group.iter().enumerate().take(PACKET) {
-                    tied |= u32::from(packet.best[r].tied) << r;
+                    walked.tied |= u32::from(packet.best[r].tied) << r;
                     if let Some(h) = hits.get_mut(i as usize) {
                         *h = hit(&packet.best[r], inst, Some(view));
                     }
                 }
-                return tied;
+                return walked;
             }
             sp -= 1;
             let (Some(&r), Some(t)) = (stack.refs.get(sp), stack.t.get(sp)) else {
-                return live;
+                return Walked {
+                    tied: live,
+                    ..walked
+                };
             };
             let open = t.simd_le(limits).to_bitmask();
             if open != 0 {

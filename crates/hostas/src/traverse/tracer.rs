@@ -8,7 +8,7 @@
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
 use super::interleaved;
-use super::packet::{self, Packets};
+use super::packet::{self, PROBE, Packets, Walked, fell_apart};
 use super::query::{
     ANY_AXES, BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
 };
@@ -46,6 +46,8 @@ pub struct Tracer<'s> {
     packet_work: Option<Box<Packets>>,
     /// Rays of packets traced again on their own, having met a tie (for the tests).
     retraced: usize,
+    /// Rays traced one at a time after a probe found that packets fell apart (for the tests).
+    after_probe: usize,
 }
 
 /// A top level that holds one identity instance of a non-empty bottom level. Its only box
@@ -125,6 +127,28 @@ impl<'s> Direct<'s> {
     #[inline(always)]
     fn finite_inverse(dir: Vec3) -> bool {
         (f32x4::ONE / lanes(dir)).is_finite().to_bitmask() & 0b111 == 0b111
+    }
+
+    /// The hits of `rays` (rays `from..` of a batch), one at a time, into `hits`; or the first
+    /// invalid ray's error.
+    fn trace_each<const FIRST: bool>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Hit],
+        from: usize,
+    ) -> Result<()> {
+        // The walk's stack on this thread's stack, a short fixed distance from the walk's own
+        // spilled values, rather than on the heap: how far apart the two lay modulo 4 KiB
+        // moved the meshes' primary rays by up to 20% from process to process (most likely
+        // 4 KiB aliasing, a load taken as overlapping a pending store to an address 4 KiB
+        // away; see `LOCAL_STACK_FROM`).
+        let mut stack = [Entry::default(); STACK_CAPACITY];
+        for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
+            r.validate().map_err(|e| e.in_ray(from + i))?;
+            let first_hit = FIRST || r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
+            *h = self.trace(&mut stack, r, first_hit);
+        }
+        Ok(())
     }
 
     /// A valid ray's hit, walked on `stack`.
@@ -292,6 +316,7 @@ impl<'s> Tracer<'s> {
             stacks: Vec::new(),
             packet_work: None,
             retraced: 0,
+            after_probe: 0,
         }
     }
 
@@ -386,7 +411,7 @@ impl<'s> Tracer<'s> {
             .is_some_and(|d| d.view.prim_kind == PrimKind::Triangles);
         let shared = interleave == Interleave::Auto && share_origins(rays);
         if !FIRST && triangles && (interleave == Interleave::Packets || shared) {
-            return self.packets(rays, hits);
+            return self.packets(rays, hits, interleave == Interleave::Auto);
         }
         let direct = self.direct.as_ref().filter(|d| {
             triangles
@@ -397,21 +422,11 @@ impl<'s> Tracer<'s> {
                 }
         });
         let Some(d) = direct else {
-            hits.reserve(rays.len());
             if let (Some(d), true) = (&self.direct, rays.len() >= LOCAL_STACK_FROM) {
-                // The walk's stack on this thread's stack, a short fixed distance from the
-                // walk's own spilled values, rather than on the heap: how far apart the two lay
-                // modulo 4 KiB moved the meshes' primary rays by up to 20% from process to
-                // process (most likely 4 KiB aliasing, a load taken as overlapping a pending
-                // store to an address 4 KiB away; see `LOCAL_STACK_FROM`).
-                let mut stack = [Entry::default(); STACK_CAPACITY];
-                for (i, r) in rays.iter().enumerate() {
-                    r.validate().map_err(|e| e.in_ray(i))?;
-                    let first_hit = FIRST || r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
-                    hits.push(d.trace(&mut stack, r, first_hit));
-                }
-                return Ok(());
+                hits.resize(rays.len(), Hit::MISS);
+                return d.trace_each::<FIRST>(rays, hits, 0);
             }
+            hits.reserve(rays.len());
             for (i, r) in rays.iter().enumerate() {
                 hits.push(self.one::<FIRST>(r).map_err(|e| e.in_ray(i))?);
             }
@@ -493,8 +508,9 @@ impl<'s> Tracer<'s> {
     /// inverse) with one axis permutation, one origin and the same signs of direction
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
     /// the coherent ones). The other rays, and a packet's rays that met a tie, are traced one
-    /// at a time.
-    fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>) -> Result<()> {
+    /// at a time. With `adapt`, the rays after the first [`PROBE`] are traced one at a time
+    /// where the first ones' packets fell apart before their leaves ([`fell_apart`]).
+    fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
         let Some(d) = &self.direct else {
@@ -507,13 +523,13 @@ impl<'s> Tracer<'s> {
         // Walks the packet gathered and empties it.
         let mut walk = |work: &mut Packets, hits: &mut [Hit]| {
             let perm = work.gathered().1;
-            let tied = by_permutation!(perm, P => match view.triangles {
+            let walked = by_permutation!(perm, P => match view.triangles {
                 Triangles::Direct(t) => packet::walk::<P, _>(&view, inst, t, flip, rays, work, hits),
                 Triangles::Indexed(t) => packet::walk::<P, _>(&view, inst, t, flip, rays, work, hits),
             });
             // Which of two candidates at the same distance the packet found first depends
             // on its order; the ray's own walk decides.
-            for r in packet::each(tied) {
+            for r in packet::each(walked.tied) {
                 let Some(&i) = work.gathered().0.get(r) else {
                     continue;
                 };
@@ -523,9 +539,24 @@ impl<'s> Tracer<'s> {
                 }
             }
             work.clear();
+            walked
         };
         let mut result = Ok(());
+        let mut probed = Walked::default();
         for (i, r) in rays.iter().enumerate() {
+            if adapt && i == PROBE {
+                if !work.gathered().0.is_empty() {
+                    probed.add(&walk(&mut work, hits));
+                }
+                if fell_apart(&probed) {
+                    let (rest, rest_hits) = (rays.get(i..), hits.get_mut(i..));
+                    if let (Some(rest), Some(rest_hits)) = (rest, rest_hits) {
+                        result = d.trace_each::<false>(rest, rest_hits, i);
+                        self.after_probe += rest.len();
+                    }
+                    break;
+                }
+            }
             if let Err(e) = r.validate() {
                 result = Err(e.in_ray(i));
                 break;
@@ -535,7 +566,7 @@ impl<'s> Tracer<'s> {
                 let perm = permutation(r.direction);
                 gathered = work.gather(i as u32, r, perm);
                 if gathered == packet::Gather::Apart {
-                    walk(&mut work, hits);
+                    probed.add(&walk(&mut work, hits));
                     // (An empty packet takes any ray with a finite inverse.)
                     gathered = work.gather(i as u32, r, perm);
                 }
@@ -1378,6 +1409,68 @@ mod tests {
         for (k, (ray, hit)) in rays.iter().zip(&hits).enumerate() {
             assert_eq!(hit.is_hit(), k < 8);
             assert_eq!(*hit, scene.trace_closest(ray).unwrap());
+        }
+    }
+
+    /// Under `Interleave::Auto`, a batch whose first packets fell apart before their leaves (a
+    /// grid of triangles finer than the rays' spacing) traces its other rays one at a time, and
+    /// one whose packets reach the leaves together (two large triangles) keeps its packets;
+    /// `Interleave::Packets` keeps them always. Every hit is the one `Tracer::closest` gives.
+    #[test]
+    fn a_batch_whose_packets_fall_apart_goes_one_ray_at_a_time() {
+        let quad = |n: usize| {
+            let positions: Vec<[f32; 3]> = (0..=n)
+                .flat_map(|y| (0..=n).map(move |x| [x as f32 / n as f32, y as f32 / n as f32, 0.0]))
+                .collect();
+            let at = |x: usize, y: usize| (y * (n + 1) + x) as u32;
+            let indices: Vec<[u32; 3]> = (0..n * n)
+                .flat_map(|k| {
+                    let (x, y) = (k % n, k / n);
+                    [
+                        [at(x, y), at(x + 1, y), at(x, y + 1)],
+                        [at(x + 1, y), at(x + 1, y + 1), at(x, y + 1)],
+                    ]
+                })
+                .collect();
+            (positions, indices)
+        };
+        // A 32 x 32 image of the square [0, 1]^2, from above.
+        let origin = [0.5, 0.5, 4.0];
+        let rays: Vec<Ray> = (0..32 * 32)
+            .map(|k| {
+                let at = [
+                    0.01 + 0.98 * (k % 32) as f32 / 31.0,
+                    0.01 + 0.98 * (k / 32) as f32 / 31.0,
+                    0.0,
+                ];
+                Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
+            })
+            .collect();
+        assert!(rays.len() > packet::PROBE);
+        let device = crate::Device::new();
+        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
+        // Cells of 1/128 (rays about 1/32 apart), then one cell.
+        for (n, mode, apart) in [
+            (128, Interleave::Auto, true),
+            (128, Interleave::Packets, false),
+            (1, Interleave::Auto, false),
+        ] {
+            let (positions, indices) = quad(n);
+            let blas =
+                crate::quick::build_triangle_blas(&device, &positions, &indices, flags).unwrap();
+            let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
+            let scene = device.scene(tlas).unwrap();
+            let mut tracer = Tracer::new(&scene);
+            let mut hits = Vec::new();
+            tracer.closest_batch_with(&rays, &mut hits, mode).unwrap();
+            let expected = if apart { rays.len() - packet::PROBE } else { 0 };
+            assert_eq!(tracer.after_probe, expected, "{n} cells a side, {mode:?}");
+            let mut hit_count = 0;
+            for (ray, hit) in rays.iter().zip(&hits) {
+                assert_eq!(*hit, scene.trace_closest(ray).unwrap());
+                hit_count += usize::from(hit.is_hit());
+            }
+            assert_eq!(hit_count, rays.len());
         }
     }
 
