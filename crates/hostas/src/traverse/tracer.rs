@@ -8,7 +8,7 @@
 //! The oracle tests check it against the brute-force tracer just like `RayQuery`.
 
 use super::interleaved;
-use super::packet::{self, PROBE, Packets, Walked, fell_apart};
+use super::packet::{self, Packets, Walked, fell_apart};
 use super::query::{
     ANY_AXES, BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
 };
@@ -46,8 +46,9 @@ pub struct Tracer<'s> {
     packet_work: Option<Box<Packets>>,
     /// Rays of packets traced again on their own, having met a tie (for the tests).
     retraced: usize,
-    /// Rays traced one at a time after a probe found that packets fell apart (for the tests).
-    after_probe: usize,
+    /// Rays traced one at a time, the packets before them in their batch having fallen apart
+    /// (for the tests).
+    alone_after_judging: usize,
 }
 
 /// A top level that holds one identity instance of a non-empty bottom level. Its only box
@@ -187,8 +188,10 @@ pub enum Interleave {
     /// identity one) of triangles: closest hits of rays that mostly share an origin (a
     /// camera's) in packets (as `Packets`: on the lent Xeon, against one ray at a time, the
     /// 1M-triangle soup's and boxes' primary rays 1.09-1.15x as fast, Sponza's and Sibenik's
-    /// 1.04-1.09x, the other meshes' about as fast, the 1M-triangle sphere's 0.94-0.96x), and
-    /// other rays interleaved through a bottom level of 16 MiB or more (used).
+    /// 1.04-1.09x, the other meshes' about as fast), the rest of a batch one at a time once its
+    /// packets are seen to fall apart before their leaves (the 1M-triangle sphere's, whose
+    /// packets alone were 0.94-0.96x as fast), and other rays interleaved through a bottom
+    /// level of 16 MiB or more (used).
     #[default]
     Auto,
     /// Several at once wherever the scene allows (one identity instance of triangles; rays
@@ -316,7 +319,7 @@ impl<'s> Tracer<'s> {
             stacks: Vec::new(),
             packet_work: None,
             retraced: 0,
-            after_probe: 0,
+            alone_after_judging: 0,
         }
     }
 
@@ -508,8 +511,8 @@ impl<'s> Tracer<'s> {
     /// inverse) with one axis permutation, one origin and the same signs of direction
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
     /// the coherent ones). The other rays, and a packet's rays that met a tie, are traced one
-    /// at a time. With `adapt`, the rays after the first [`PROBE`] are traced one at a time
-    /// where the first ones' packets fell apart before their leaves ([`fell_apart`]).
+    /// at a time. With `adapt`, once the batch's packets so far mostly fell apart before their
+    /// leaves ([`fell_apart`]), its other rays are traced one at a time.
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
@@ -542,21 +545,10 @@ impl<'s> Tracer<'s> {
             walked
         };
         let mut result = Ok(());
-        let mut probed = Walked::default();
+        // (How the batch's packets held together, until judged.)
+        let mut so_far = Walked::default();
+        let mut adapt = adapt;
         for (i, r) in rays.iter().enumerate() {
-            if adapt && i == PROBE {
-                if !work.gathered().0.is_empty() {
-                    probed.add(&walk(&mut work, hits));
-                }
-                if fell_apart(&probed) {
-                    let (rest, rest_hits) = (rays.get(i..), hits.get_mut(i..));
-                    if let (Some(rest), Some(rest_hits)) = (rest, rest_hits) {
-                        result = d.trace_each::<false>(rest, rest_hits, i);
-                        self.after_probe += rest.len();
-                    }
-                    break;
-                }
-            }
             if let Err(e) = r.validate() {
                 result = Err(e.in_ray(i));
                 break;
@@ -566,7 +558,19 @@ impl<'s> Tracer<'s> {
                 let perm = permutation(r.direction);
                 gathered = work.gather(i as u32, r, perm);
                 if gathered == packet::Gather::Apart {
-                    probed.add(&walk(&mut work, hits));
+                    so_far.add(&walk(&mut work, hits));
+                    if let (true, Some(apart)) = (adapt, fell_apart(&so_far)) {
+                        adapt = false;
+                        if apart {
+                            // The rest one at a time, from this ray.
+                            let rest = (rays.get(i..), hits.get_mut(i..));
+                            if let (Some(rest), Some(rest_hits)) = rest {
+                                result = d.trace_each::<false>(rest, rest_hits, i);
+                                self.alone_after_judging += rest.len();
+                            }
+                            break;
+                        }
+                    }
                     // (An empty packet takes any ray with a finite inverse.)
                     gathered = work.gather(i as u32, r, perm);
                 }
@@ -1446,7 +1450,6 @@ mod tests {
                 Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
             })
             .collect();
-        assert!(rays.len() > packet::PROBE);
         let device = crate::Device::new();
         let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
         // Cells of 1/128 (rays about 1/32 apart), then one cell.
@@ -1463,8 +1466,15 @@ mod tests {
             let mut tracer = Tracer::new(&scene);
             let mut hits = Vec::new();
             tracer.closest_batch_with(&rays, &mut hits, mode).unwrap();
-            let expected = if apart { rays.len() - packet::PROBE } else { 0 };
-            assert_eq!(tracer.after_probe, expected, "{n} cells a side, {mode:?}");
+            let what = format!(
+                "{n} cells a side, {mode:?}: {} after",
+                tracer.alone_after_judging
+            );
+            if apart {
+                assert!(tracer.alone_after_judging > rays.len() * 3 / 4, "{what}");
+            } else {
+                assert_eq!(tracer.alone_after_judging, 0, "{what}");
+            }
             let mut hit_count = 0;
             for (ray, hit) in rays.iter().zip(&hits) {
                 assert_eq!(*hit, scene.trace_closest(ray).unwrap());
