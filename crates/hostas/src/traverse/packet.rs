@@ -66,8 +66,8 @@ pub(super) enum Gather {
     Alone,
 }
 
-/// What a packet walk works in (about 26 KiB), made on the thread's stack per batch (see
-/// `LOCAL_PACKETS_FROM` in the tracer).
+/// What a packet walk works in (about 26 KiB): made on the thread's stack per batch, or kept
+/// by the tracer for short batches (see `LOCAL_PACKETS_FROM` in the tracer).
 pub(super) struct Packets {
     stack: PacketStack,
     packet: Packet,
@@ -177,23 +177,25 @@ pub(super) struct Walked {
 impl Walked {
     /// Adds `other`'s counts to these (the ties are a packet's own: not added).
     pub(super) fn add(&mut self, other: &Walked) {
-        self.at_leaves += other.at_leaves;
-        self.alone += other.alone;
+        self.at_leaves = self.at_leaves.saturating_add(other.at_leaves);
+        self.alone = self.alone.saturating_add(other.alone);
     }
 }
 
-/// Whether packets, as walked so far (`w`), fell apart before their leaves: once their rays
-/// walked a subtree alone or reached a leaf together [`JUDGED_FROM`] times, `Some(true)` if
-/// they walked subtrees alone more than eight times as often. Such rays share only the upper
-/// nodes, where the packet's own work (its rays' entries per child) costs more than it saves.
-/// (Primary rays at 256 x 256, per batch of 1024: the 1M-triangle sphere's at most 0.06 leaves
-/// reached together per subtree walked alone; the soup's, boxes', the bunny's and the other
-/// meshes' at least 0.21.)
+/// Whether packets, as walked so far (`w`), fell apart before their leaves: once
+/// [`JUDGED_FROM`] subtrees were walked alone or rays reached a leaf together, `Some(true)`
+/// where subtrees were walked alone more than eight times as often as rays reached a leaf
+/// together. Such rays share only the upper nodes, where the packet's own work (its rays'
+/// entries per child) costs more than it saves. (Primary rays at 256 x 256, per batch of
+/// 1,024: the 1M-triangle sphere's at most 0.06 rays reached a leaf together per subtree
+/// walked alone; the soup's, boxes', the bunny's and the other meshes' at least 0.21.)
 pub(super) fn fell_apart(w: &Walked) -> Option<bool> {
-    (w.alone + w.at_leaves >= JUDGED_FROM).then(|| w.at_leaves.saturating_mul(8) < w.alone)
+    (w.alone.saturating_add(w.at_leaves) >= JUDGED_FROM)
+        .then(|| w.at_leaves.saturating_mul(8) < w.alone)
 }
 
-/// How many subtrees walked alone and leaves reached together [`fell_apart`] waits for.
+/// How many subtrees walked alone and rays that reached a leaf together [`fell_apart`] waits
+/// for.
 const JUDGED_FROM: u32 = 64;
 
 /// Walks the rays gathered in `work` (of batch `rays`, with permutation `P`, as coherent as

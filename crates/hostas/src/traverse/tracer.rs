@@ -42,7 +42,8 @@ pub struct Tracer<'s> {
     order: Vec<u32>,
     classes: Vec<u8>,
     stacks: Vec<BlasStack>,
-    /// What [`Tracer::closest_batch`]'s packets work in, kept for the next batch.
+    /// What [`Tracer::closest_batch`]'s packets work in for batches shorter than
+    /// [`LOCAL_PACKETS_FROM`], kept for the next.
     packet_work: Option<Box<Packets>>,
     /// Rays of packets traced again on their own, having met a tie (for the tests).
     retraced: usize,
