@@ -47,9 +47,12 @@ pub struct Tracer<'s> {
     packet_work: Option<Box<Packets>>,
     /// Rays of packets traced again on their own, having met a tie (for the tests).
     retraced: usize,
-    /// Rays traced one at a time, the packets before them in their batch having fallen apart
-    /// (for the tests).
+    /// Rays traced one at a time, the packets before them in their batch (or in a recent
+    /// batch) having fallen apart (for the tests).
     alone_after_judging: usize,
+    /// Batches still to trace one at a time without judging their packets, the last judged
+    /// batch's having fallen apart (see [`APART_FOR`]).
+    apart_for: u32,
 }
 
 /// A top level that holds one identity instance of a non-empty bottom level. Its only box
@@ -189,10 +192,10 @@ pub enum Interleave {
     /// identity one) of triangles: closest hits of rays that mostly share an origin (a
     /// camera's) in packets (as `Packets`: on the lent Xeon, against one ray at a time, the
     /// 1M-triangle soup's and boxes' primary rays 1.09-1.15x as fast, Sponza's and Sibenik's
-    /// 1.04-1.09x, the other meshes' about as fast), the rest of a batch one at a time once its
-    /// packets are seen to fall apart before their leaves (the 1M-triangle sphere's, whose
-    /// packets alone were 0.94-0.96x as fast), and other rays interleaved through a bottom
-    /// level of 16 MiB or more (used).
+    /// 1.04-1.09x, the other meshes' about as fast), the rest of a batch (and the tracer's next
+    /// seven batches) one at a time once its packets are seen to fall apart before their
+    /// leaves (the 1M-triangle sphere's, whose packets alone were 0.94-0.96x as fast), and
+    /// other rays interleaved through a bottom level of 16 MiB or more (used).
     #[default]
     Auto,
     /// Several at once wherever the scene allows (one identity instance of triangles; rays
@@ -226,6 +229,12 @@ const LOCAL_STACK_FROM: usize = 16;
 /// soup and four meshes), 31 read at least 7% below the scene's usual with the heap's state,
 /// 18 with the stack's; the means moved by -2.2% (Sibenik) to +2.2% (Sponza).
 const LOCAL_PACKETS_FROM: usize = 256;
+
+/// Batches that [`Interleave::Auto`] traces one ray at a time after one whose packets fell
+/// apart ([`fell_apart`]), before it judges packets again: the rays a batch walks in packets
+/// until judged (70-150 of the 1M sphere's 1,024) cost more than one at a time, and a camera's
+/// next batches are much like its last.
+const APART_FOR: u32 = 7;
 
 /// The most rays [`Tracer::closest_batch_with`] orders at once (longer batches are split).
 const MAX_BATCH: usize = 1 << 30;
@@ -331,6 +340,7 @@ impl<'s> Tracer<'s> {
             packet_work: None,
             retraced: 0,
             alone_after_judging: 0,
+            apart_for: 0,
         }
     }
 
@@ -527,6 +537,14 @@ impl<'s> Tracer<'s> {
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
+        if adapt && self.apart_for > 0 {
+            // The last judged batch's packets fell apart: not judged again for a while.
+            self.apart_for -= 1;
+            if let Some(d) = &self.direct {
+                self.alone_after_judging += rays.len();
+                return d.trace_each::<false>(rays, hits, 0);
+            }
+        }
         if rays.len() >= LOCAL_PACKETS_FROM {
             // On this thread's stack, at a fixed distance from the walk's own values (as the
             // one-ray walk's stack, `Direct::trace_each`): on the heap, how far the two lay
@@ -595,6 +613,7 @@ impl<'s> Tracer<'s> {
                     so_far.add(&walk(work, hits));
                     if let (true, Some(apart)) = (adapt, fell_apart(&so_far)) {
                         adapt = false;
+                        self.apart_for = if apart { APART_FOR } else { 0 };
                         if apart {
                             // The rest one at a time, from this ray.
                             let rest = (rays.get(i..), hits.get_mut(i..));
@@ -1505,8 +1524,26 @@ mod tests {
             );
             if apart {
                 assert!(tracer.alone_after_judging > rays.len() * 3 / 4, "{what}");
+                assert_eq!(tracer.apart_for, APART_FOR);
             } else {
                 assert_eq!(tracer.alone_after_judging, 0, "{what}");
+            }
+            // The next `APART_FOR` batches go one at a time, unjudged; the one after is judged
+            // again.
+            let mut again = Vec::new();
+            for k in 0..=APART_FOR {
+                let before = tracer.alone_after_judging;
+                tracer.closest_batch_with(&rays, &mut again, mode).unwrap();
+                assert_eq!(again, hits);
+                let alone = tracer.alone_after_judging - before;
+                match (apart, k < APART_FOR) {
+                    (false, _) => assert_eq!(alone, 0, "{what}, batch {k}"),
+                    (true, true) => assert_eq!(alone, rays.len(), "{what}, batch {k}"),
+                    (true, false) => {
+                        assert!(alone > rays.len() * 3 / 4 && alone < rays.len(), "{what}");
+                        assert_eq!(tracer.apart_for, APART_FOR);
+                    }
+                }
             }
             let mut hit_count = 0;
             for (ray, hit) in rays.iter().zip(&hits) {
