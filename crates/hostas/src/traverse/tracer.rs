@@ -533,12 +533,14 @@ impl<'s> Tracer<'s> {
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
     /// the coherent ones). The other rays, and a packet's rays that met a tie, are traced one
     /// at a time. With `adapt`, once the batch's packets so far mostly fell apart before their
-    /// leaves ([`fell_apart`]), its other rays are traced one at a time.
+    /// leaves ([`fell_apart`]), its other rays are traced one at a time, and so are the next
+    /// [`APART_FOR`] batches, unjudged.
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
-        if adapt && self.apart_for > 0 {
-            // The last judged batch's packets fell apart: not judged again for a while.
+        if adapt && self.apart_for > 0 && rays.len() >= LOCAL_STACK_FROM {
+            // The last judged batch's packets fell apart: not judged again for a while. (A
+            // batch of a few rays goes in packets, not to make a stack for them.)
             self.apart_for -= 1;
             if let Some(d) = &self.direct {
                 self.alone_after_judging += rays.len();
