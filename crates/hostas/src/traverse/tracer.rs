@@ -599,7 +599,7 @@ impl<'s> Tracer<'s> {
             walked
         };
         let mut result = Ok(());
-        // (How the batch's packets held together, until judged.)
+        // (How the batch's packets held together, counted until judged.)
         let mut so_far = Walked::default();
         let mut adapt = adapt;
         for (i, r) in rays.iter().enumerate() {
@@ -612,18 +612,21 @@ impl<'s> Tracer<'s> {
                 let perm = permutation(r.direction);
                 gathered = work.gather(i as u32, r, perm);
                 if gathered == packet::Gather::Apart {
-                    so_far.add(&walk(work, hits));
-                    if let (true, Some(apart)) = (adapt, fell_apart(&so_far)) {
-                        adapt = false;
-                        self.apart_for = if apart { APART_FOR } else { 0 };
-                        if apart {
-                            // The rest one at a time, from this ray.
-                            let rest = (rays.get(i..), hits.get_mut(i..));
-                            if let (Some(rest), Some(rest_hits)) = rest {
-                                result = d.trace_each::<false>(rest, rest_hits, i);
-                                self.alone_after_judging += rest.len();
+                    let walked = walk(work, hits);
+                    if adapt {
+                        so_far.add(&walked);
+                        if let Some(apart) = fell_apart(&so_far) {
+                            adapt = false;
+                            self.apart_for = if apart { APART_FOR } else { 0 };
+                            if apart {
+                                // The rest one at a time, from this ray.
+                                let rest = (rays.get(i..), hits.get_mut(i..));
+                                if let (Some(rest), Some(rest_hits)) = rest {
+                                    result = d.trace_each::<false>(rest, rest_hits, i);
+                                    self.alone_after_judging += rest.len();
+                                }
+                                break;
                             }
-                            break;
                         }
                     }
                     // (An empty packet takes any ray with a finite inverse.)
