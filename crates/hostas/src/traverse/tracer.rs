@@ -531,8 +531,8 @@ impl<'s> Tracer<'s> {
     /// case (no culling or first-hit flags, the instance's mask met, a direction with a finite
     /// inverse) with one axis permutation, one origin and the same signs of direction
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
-    /// the coherent ones). The other rays, and a packet's rays that met a tie, are traced one
-    /// at a time. With `adapt`, once the batch's packets so far mostly fell apart before their
+    /// the coherent ones). A ray that reaches no child of the root is a miss, gathered in no
+    /// packet. The other rays, and a packet's rays that met a tie, are traced one at a time. With `adapt`, once the batch's packets so far mostly fell apart before their
     /// leaves ([`fell_apart`]), its other rays are traced one at a time, and so are the next
     /// [`APART_FOR`] batches, unjudged.
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
@@ -577,6 +577,7 @@ impl<'s> Tracer<'s> {
         let (view, inst) = (d.view, d.inst);
         let flip = inst.flags & vk::GeometryInstanceFlagsKHR::TRIANGLE_FLIP_FACING.as_raw() != 0;
         let mut retraced = 0;
+        let root = view.nodes.first();
         // Walks the packet gathered and empties it.
         let mut walk = |work: &mut Packets, hits: &mut [Hit]| {
             let perm = work.gathered().1;
@@ -631,6 +632,15 @@ impl<'s> Tracer<'s> {
                     }
                     // (An empty packet takes any ray with a finite inverse.)
                     gathered = work.gather(i as u32, r, perm);
+                }
+                if gathered == packet::Gather::Taken
+                    && let Some(root) = root
+                    && work.take_back_if_missing(root, r.t_min, r.t_max)
+                {
+                    if let Some(h) = hits.get_mut(i) {
+                        *h = hit(&Best::miss(r.t_max), inst, Some(&view));
+                    }
+                    continue;
                 }
             }
             if gathered != packet::Gather::Taken {
