@@ -1,0 +1,30 @@
+#!/usr/bin/env python3
+"""Each paired trace target's times pair by pair (hostas ms | Embree ms, in the order run) and
+its median ratio, per file: what shows whether a low ratio came from a few pairs or from all
+(a slow stretch of seconds on the lent machine slows every pair in it, hostas more than
+Embree).
+usage: pairs.py RUN.jsonl... [--measure "primary rays 1T"]
+"""
+import json
+import sys
+
+
+def main(args):
+    measure = "primary rays 1T"
+    if "--measure" in args:
+        i = args.index("--measure")
+        measure = args[i + 1]
+        del args[i : i + 2]
+    if not args:
+        sys.exit(__doc__)
+    for path in args:
+        for line in open(path):
+            d = json.loads(line)
+            if d.get("measure") == measure and "hostas_ms" in d:
+                h = " ".join(f"{x:.1f}" for x in d["hostas_ms"])
+                e = " ".join(f"{x:.1f}" for x in d["embree_ms"])
+                print(f"{path} {d['scene']}: {h} | {e}  ratio {d['median']:.3f}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
