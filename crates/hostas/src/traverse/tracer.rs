@@ -532,8 +532,9 @@ impl<'s> Tracer<'s> {
     /// inverse) with one axis permutation, one origin and the same signs of direction
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
     /// the coherent ones). A ray that reaches no child of the root is a miss, gathered in no
-    /// packet. The other rays, and a packet's rays that met a tie, are traced one at a time. With `adapt`, once the batch's packets so far mostly fell apart before their
-    /// leaves ([`fell_apart`]), its other rays are traced one at a time, and so are the next
+    /// packet. The other rays, and a packet's rays that met a tie, are traced one at a time.
+    /// With `adapt`, once the batch's packets so far mostly fell apart before their leaves
+    /// ([`fell_apart`]), its other rays are traced one at a time, and so are the next
     /// [`APART_FOR`] batches, unjudged.
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
         hits.clear();
