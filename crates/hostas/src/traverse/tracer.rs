@@ -636,7 +636,7 @@ impl<'s> Tracer<'s> {
                 }
                 if gathered == packet::Gather::Taken
                     && let Some(root) = root
-                    && work.take_back_if_missing(root, r.t_min, r.t_max)
+                    && work.take_back_if_missing(root)
                 {
                     if let Some(h) = hits.get_mut(i) {
                         *h = hit(&Best::miss(r.t_max), inst, Some(&view));
