@@ -9,6 +9,7 @@ mod interleaved;
 mod packet;
 mod query;
 mod scene;
+mod screen;
 mod tracer;
 pub mod triangle;
 

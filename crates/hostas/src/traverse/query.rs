@@ -168,7 +168,7 @@ pub(super) const ROBUST_FAR: f32 =
 /// nearer than the box's entry: a ray through a vertex that triangles in two leaves share
 /// found the farther of the two hits when the nearer one's box was pruned by exactly that.
 /// 2^-16 relative (hundreds of ulps) covers it and costs no measurable pruning.
-const PRUNE_SLACK: f32 = 1.0 + 1.0 / 65536.0;
+pub(super) const PRUNE_SLACK: f32 = 1.0 + 1.0 / 65536.0;
 
 /// The farthest entry distance of a box that may still hold a hit nearer than `t_max`.
 #[inline(always)]

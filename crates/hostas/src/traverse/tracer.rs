@@ -13,6 +13,7 @@ use super::query::{
     ANY_AXES, BoxRay, Entry, STACK_CAPACITY, descend, opacity_culled, prune_limit, resolve_opacity,
 };
 use super::scene::{Hit, HitKind, Scene};
+use super::screen::{self, RootBox, Screened};
 use super::triangle::{ShearedRay, TriangleHit, by_permutation, permutation};
 use super::{Ray, RayFlags};
 use crate::error::Result;
@@ -69,6 +70,9 @@ struct Direct<'s> {
     /// Whether [`Tracer::closest_batch`] walks its rays several at a time (see
     /// [`INTERLEAVE_FROM_BYTES`]).
     interleave: bool,
+    /// The box around the root's children, which a camera's rays are screened against eight
+    /// at a time ([`screen`]); `None` where a plane is NaN.
+    root_box: Option<RootBox>,
 }
 
 /// The size from which a bottom level's rays are walked several at a time by
@@ -96,13 +100,15 @@ impl<'s> Direct<'s> {
             PrimKind::Aabbs => RayFlags::SKIP_AABBS,
             _ => return None,
         };
-        (!view.nodes.is_empty()).then_some(Direct {
+        let root_box = RootBox::new(view.nodes.first()?);
+        Some(Direct {
             view,
             inst,
             mask: inst.mask & 0xff,
             skip: skip.0,
             interleave: view.prim_kind == PrimKind::Triangles
                 && view.header.used_size >= INTERLEAVE_FROM_BYTES,
+            root_box,
         })
     }
 
@@ -135,12 +141,14 @@ impl<'s> Direct<'s> {
     }
 
     /// The hits of `rays` (rays `from..` of a batch), one at a time, into `hits`; or the first
-    /// invalid ray's error.
+    /// invalid ray's error. With `screened`, the rays are first screened eight at a time
+    /// against the root's box ([`Direct::screen`]): for a camera's rays, many of which miss.
     fn trace_each<const FIRST: bool>(
         &self,
         rays: &[Ray],
         hits: &mut [Hit],
         from: usize,
+        screened: bool,
     ) -> Result<()> {
         // The walk's stack on this thread's stack, a short fixed distance from the walk's own
         // spilled values, rather than on the heap: how far apart the two lay modulo 4 KiB
@@ -148,12 +156,32 @@ impl<'s> Direct<'s> {
         // 4 KiB aliasing, a load taken as overlapping a pending store to an address 4 KiB
         // away; see `LOCAL_STACK_FROM`).
         let mut stack = [Entry::default(); STACK_CAPACITY];
+        let mut screen = Screened::default();
         for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
-            r.validate().map_err(|e| e.in_ray(from + i))?;
+            let bit = 1 << (i % screen::LANES);
+            if screened && bit == 1 {
+                screen = self.screen(rays.get(i..).unwrap_or_default());
+            }
+            if screen.plain & bit == 0 {
+                r.validate().map_err(|e| e.in_ray(from + i))?;
+            }
+            if screen.outside & bit != 0 {
+                *h = Hit::MISS;
+                continue;
+            }
             let first_hit = FIRST || r.flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
             *h = self.trace(&mut stack, r, first_hit);
         }
         Ok(())
+    }
+
+    /// [`RootBox::screen`] of the first [`screen::LANES`] of `rays` against the root's box
+    /// (nothing found where there is no box).
+    #[inline(always)]
+    fn screen(&self, rays: &[Ray]) -> Screened {
+        self.root_box
+            .as_ref()
+            .map_or(Screened::default(), |b| b.screen(rays))
     }
 
     /// A valid ray's hit, walked on `stack`.
@@ -448,7 +476,7 @@ impl<'s> Tracer<'s> {
         let Some(d) = direct else {
             if let (Some(d), true) = (&self.direct, rays.len() >= LOCAL_STACK_FROM) {
                 hits.resize(rays.len(), Hit::MISS);
-                return d.trace_each::<FIRST>(rays, hits, 0);
+                return d.trace_each::<FIRST>(rays, hits, 0, shared);
             }
             hits.reserve(rays.len());
             for (i, r) in rays.iter().enumerate() {
@@ -545,7 +573,7 @@ impl<'s> Tracer<'s> {
             self.apart_for -= 1;
             if let Some(d) = &self.direct {
                 self.alone_after_judging += rays.len();
-                return d.trace_each::<false>(rays, hits, 0);
+                return d.trace_each::<false>(rays, hits, 0, true);
             }
         }
         if rays.len() >= LOCAL_PACKETS_FROM {
@@ -604,10 +632,24 @@ impl<'s> Tracer<'s> {
         // (How the batch's packets held together, counted until judged.)
         let mut so_far = Walked::default();
         let mut adapt = adapt;
+        let mut screen = Screened::default();
         for (i, r) in rays.iter().enumerate() {
-            if let Err(e) = r.validate() {
+            let bit = 1 << (i % screen::LANES);
+            if bit == 1 {
+                screen = d.screen(rays.get(i..).unwrap_or_default());
+            }
+            if screen.plain & bit == 0
+                && let Err(e) = r.validate()
+            {
                 result = Err(e.in_ray(i));
                 break;
+            }
+            if screen.outside & bit != 0 {
+                // (A miss, as the root's node test would find.)
+                if let Some(h) = hits.get_mut(i) {
+                    *h = Hit::MISS;
+                }
+                continue;
             }
             let mut gathered = packet::Gather::Alone;
             if d.common_flags(r, true) {
@@ -624,7 +666,7 @@ impl<'s> Tracer<'s> {
                                 // The rest one at a time, from this ray.
                                 let rest = (rays.get(i..), hits.get_mut(i..));
                                 if let (Some(rest), Some(rest_hits)) = rest {
-                                    result = d.trace_each::<false>(rest, rest_hits, i);
+                                    result = d.trace_each::<false>(rest, rest_hits, i, true);
                                     self.alone_after_judging += rest.len();
                                 }
                                 break;
