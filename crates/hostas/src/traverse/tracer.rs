@@ -141,14 +141,17 @@ impl<'s> Direct<'s> {
     }
 
     /// The hits of `rays` (rays `from..` of a batch), one at a time, into `hits`; or the first
-    /// invalid ray's error. With `screened`, the rays are first screened eight at a time
+    /// invalid ray's error. With `SCREENED`, the rays are first screened eight at a time
     /// against the root's box ([`Direct::screen`]): for a camera's rays, many of which miss.
-    fn trace_each<const FIRST: bool>(
+    /// (A constant, so that the other rays' loop is the plain one: with the choice made at
+    /// run time, incoherent rays executed 2.6-3.3% more instructions under callgrind; inlined
+    /// into its caller, 0.5% more.)
+    #[inline(never)]
+    fn trace_each<const FIRST: bool, const SCREENED: bool>(
         &self,
         rays: &[Ray],
         hits: &mut [Hit],
         from: usize,
-        screened: bool,
     ) -> Result<()> {
         // The walk's stack on this thread's stack, a short fixed distance from the walk's own
         // spilled values, rather than on the heap: how far apart the two lay modulo 4 KiB
@@ -159,7 +162,7 @@ impl<'s> Direct<'s> {
         let mut screen = Screened::default();
         for (i, (r, h)) in rays.iter().zip(hits).enumerate() {
             let bit = 1 << (i % screen::LANES);
-            if screened && bit == 1 {
+            if SCREENED && bit == 1 {
                 screen = self.screen(rays.get(i..).unwrap_or_default());
             }
             if screen.plain & bit == 0 {
@@ -476,7 +479,11 @@ impl<'s> Tracer<'s> {
         let Some(d) = direct else {
             if let (Some(d), true) = (&self.direct, rays.len() >= LOCAL_STACK_FROM) {
                 hits.resize(rays.len(), Hit::MISS);
-                return d.trace_each::<FIRST>(rays, hits, 0, shared);
+                return if shared {
+                    d.trace_each::<FIRST, true>(rays, hits, 0)
+                } else {
+                    d.trace_each::<FIRST, false>(rays, hits, 0)
+                };
             }
             hits.reserve(rays.len());
             for (i, r) in rays.iter().enumerate() {
@@ -573,7 +580,7 @@ impl<'s> Tracer<'s> {
             self.apart_for -= 1;
             if let Some(d) = &self.direct {
                 self.alone_after_judging += rays.len();
-                return d.trace_each::<false>(rays, hits, 0, true);
+                return d.trace_each::<false, true>(rays, hits, 0);
             }
         }
         if rays.len() >= LOCAL_PACKETS_FROM {
@@ -666,7 +673,7 @@ impl<'s> Tracer<'s> {
                                 // The rest one at a time, from this ray.
                                 let rest = (rays.get(i..), hits.get_mut(i..));
                                 if let (Some(rest), Some(rest_hits)) = rest {
-                                    result = d.trace_each::<false>(rest, rest_hits, i, true);
+                                    result = d.trace_each::<false, true>(rest, rest_hits, i);
                                     self.alone_after_judging += rest.len();
                                 }
                                 break;
