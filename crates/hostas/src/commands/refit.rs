@@ -677,9 +677,10 @@ fn fused(
 /// Refits one fast-decoded triangle geometry: on one thread (or on a few, when the leaves'
 /// primitives are scattered over the application's buffers, as in a triangle soup) by
 /// rewriting the stored triangles first, then computing the boxes from them; on more threads
-/// in one pass over the tree, subtrees in parallel. On one thread, a large structure whose
-/// stored order follows the application's (a mesh) has its triangles rewritten in stored order
-/// (gathered by id); any other in primitive order (scattered to their slots).
+/// in one pass over the tree, subtrees in parallel. On one thread, a small or a large
+/// structure whose stored order follows the application's (a mesh) has its triangles
+/// rewritten in stored order (gathered by id); any other in primitive order (scattered to
+/// their slots).
 fn refit_triangles<I: Indices, V: Vertices>(
     tree: Tree<'_, [f32; 9]>,
     d: TriF32<I, V>,
@@ -697,12 +698,20 @@ fn refit_triangles<I: Indices, V: Vertices>(
         return tree.refit(&d);
     }
     let Tree { ids, nodes, prims } = tree;
-    if prims.len() >= GATHER_MIN_PRIMS && !scattered {
+    if prims.len() <= CACHED_MAX_PRIMS && !scattered {
+        // The application's buffers of a small mesh stay in the core's caches, where a gather
+        // needs no requests ahead, and the stored triangles are written in sequence. On the
+        // lent Xeon (five rounds alternated on one lease, against the pass in primitive order):
+        // the bunny 1.32x, Sponza 1.22x, Sibenik 1.20x; the conference room (331k) 1.00x.
+        // On the VM's Zen 4 (1 MiB of L2, the Xeon's 2 MiB; medians of three): the three
+        // 0.94-1.02x, the conference 0.70x.
+        in_stored_order::<I, V, false>(&d, ids, prims)?;
+    } else if prims.len() >= GATHER_MIN_PRIMS && !scattered {
         // On the VM, against the pass in primitive order: 1M boxes 1.1-1.4x, sphere 1.15-1.2x
         // (no slots to fill and read, the stored triangles written in sequence); a 1M soup,
         // whose gathers each miss the caches, 0.6x; the conference room (331k, most of it
         // in the caches, where the prefetches only add instructions) 0.94x.
-        in_stored_order(&d, ids, prims)?;
+        in_stored_order::<I, V, true>(&d, ids, prims)?;
     } else {
         // The stored slot of each primitive, in scratch (4 bytes per primitive, aligned).
         let skip = scratch.as_ptr().align_offset(4).min(scratch.len());
@@ -725,8 +734,13 @@ fn refit_triangles<I: Indices, V: Vertices>(
 /// From this many stored triangles (9 MiB of them) the pass in primitive order prefetches.
 const PREFETCH_MIN_PRIMS: usize = 1 << 18;
 
+/// Up to this many stored triangles, unless scattered, they are rewritten in stored order
+/// with no requests ahead: the application's indices and vertices (about 2.3 MiB with 32-bit
+/// indices at two triangles per vertex) stay in a core's caches.
+const CACHED_MAX_PRIMS: usize = 1 << 17;
+
 /// From this many stored triangles (18 MiB of them), unless scattered, they are rewritten in
-/// stored order.
+/// stored order, requesting what they read well ahead.
 const GATHER_MIN_PRIMS: usize = 1 << 19;
 
 /// Whether consecutive stored primitives are mostly far apart in primitive order (sampled).
@@ -816,10 +830,11 @@ fn in_primitive_order<I: Indices, V: Vertices, const AHEAD: bool>(
 }
 
 /// Rewrites the stored triangles (`prims`, ids `ids`) in stored order, each gathered from the
-/// application's buffers by id. `None` if any triangle is not valid.
+/// application's buffers by id (with `AHEAD`, what it reads requested well ahead). `None` if
+/// any triangle is not valid.
 // (Not inlined, as `in_primitive_order`.)
 #[inline(never)]
-fn in_stored_order<I: Indices, V: Vertices>(
+fn in_stored_order<I: Indices, V: Vertices, const AHEAD: bool>(
     d: &TriF32<I, V>,
     ids: &[u32],
     prims: &mut [[f32; 9]],
@@ -834,7 +849,11 @@ fn in_stored_order<I: Indices, V: Vertices>(
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
     let local = |id: u32| id.wrapping_sub(d.first) as usize;
-    let head = ids.len().saturating_sub(INDEX_AHEAD);
+    let head = if AHEAD {
+        ids.len().saturating_sub(INDEX_AHEAD)
+    } else {
+        0
+    };
     let (prims_head, prims_tail) = prims.split_at_mut(head.min(prims.len()));
     let index_ahead = ids.get(INDEX_AHEAD..).unwrap_or(&[]);
     let verts_ahead = ids.get(VERTS_AHEAD..).unwrap_or(&[]);
@@ -1949,17 +1968,31 @@ mod tests {
     }
 
     #[test]
-    fn a_large_mesh_is_rewritten_in_stored_order_with_the_same_result() {
+    fn meshes_of_every_size_are_rewritten_with_the_same_result() {
         let mut r = Rng(21);
-        for index in [vk::IndexType::UINT32, vk::IndexType::NONE_KHR] {
-            // 2^19 triangles, as many as the path needs.
-            let t = grid(512, index);
+        // Three paths by size: 2^17 triangles, as many as the small stored-order one takes
+        // (no requests ahead); about 180k, in primitive order (no requests either); 2^19, as
+        // many as the large stored-order one needs (requests ahead).
+        for (n, index) in [
+            (256, vk::IndexType::UINT32),
+            (256, vk::IndexType::NONE_KHR),
+            (300, vk::IndexType::UINT32),
+            (512, vk::IndexType::UINT32),
+            (512, vk::IndexType::NONE_KHR),
+        ] {
+            let t = grid(n, index);
             let ranges = tri_ranges(&[&t]);
             let mut moved = t.clone();
             moved.jiggle(&mut r);
             // (The path is taken: the built tree's ids follow the primitive order.)
             let ids = stored_ids(&t, &ranges);
-            assert!(ids.len() >= GATHER_MIN_PRIMS && !scattered(&ids));
+            let len = ids.len();
+            assert!(!scattered(&ids));
+            match n {
+                256 => assert_eq!(len, CACHED_MAX_PRIMS),
+                300 => assert!(CACHED_MAX_PRIMS < len && len < PREFETCH_MIN_PRIMS),
+                _ => assert!(len >= GATHER_MIN_PRIMS),
+            }
             check(
                 &[t.geometry()],
                 &[moved.geometry()],
