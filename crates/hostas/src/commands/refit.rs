@@ -8,8 +8,9 @@
 //! run in parallel. For one triangle geometry on one thread (and for scattered ones on a few)
 //! the stored triangles are instead rewritten first, and the walk then only computes the
 //! boxes: in primitive order (the application's buffers read in sequence, the stored
-//! triangles written where the ids say), or, for large meshes on one thread, in stored order
-//! (each triangle gathered by id, its indices and vertices requested well ahead). It relies on
+//! triangles written where the ids say), or, for small and large meshes on one thread, in
+//! stored order (each triangle gathered by id; in a large one, its indices and vertices
+//! requested well ahead). It relies on
 //! the layout the encoder writes (nodes in depth-first preorder, primitives in leaf order) and
 //! checks it as it goes. Anything it does not expect (an invalid primitive, an unusual layout)
 //! makes it give up, and the general path below redoes the whole update from the start: it
@@ -689,8 +690,10 @@ fn refit_triangles<I: Indices, V: Vertices>(
     // The passes before the walk are sequential; the tree walk in leaf order scales with
     // threads (each waits on its own cache misses). On one thread the pass in primitive order
     // reads the application's buffers in sequence and was faster than the walk on every scene
-    // measured (1M soup about 2x, 1M random boxes 1.5x, meshes 1.05-1.15x); on two it is
-    // about four times as fast on a 1M soup; from 8 threads on the walk should win
+    // measured on the VM (1M soup about 2x, 1M random boxes 1.5x, meshes 1.05-1.15x; on the
+    // lent Xeon the soup 1.8x, boxes 1.8x, the conference 1.13x, and the walk the faster on
+    // the three small meshes, 1.03-1.12x, where the gather in stored order beats both); on
+    // two it is about four times as fast on a 1M soup; from 8 threads on the walk should win
     // (estimated from its speed per thread, not measured).
     let threads = rayon::current_num_threads();
     let scattered = scattered(tree.ids);
