@@ -852,6 +852,7 @@ fn in_stored_order<I: Indices, V: Vertices, const AHEAD: bool>(
     // (A copy, so that the compiler keeps the fields in registers.)
     let d = *d;
     let local = |id: u32| id.wrapping_sub(d.first) as usize;
+    // (Without `AHEAD`, every triangle is gathered by the second loop, which requests nothing.)
     let head = if AHEAD {
         ids.len().saturating_sub(INDEX_AHEAD)
     } else {

@@ -14,7 +14,7 @@
 //! screened ray), a ray that reaches some child reaches the box.
 
 use super::Ray;
-use super::query::{PRUNE_SLACK, ROBUST_FAR};
+use super::query::{ROBUST_FAR, prune_limit8};
 use crate::layout::{Node, WIDTH};
 use crate::math::{fmax8, fmin8};
 use wide::{f32x8, u32x8};
@@ -91,7 +91,7 @@ impl RootBox {
         // `BoxRay::new`'s inverses, and `BoxRay::slabs` (float form) against the box.
         let s = f32x8::splat;
         let mut near = t_min;
-        let mut far = fmin8(t_max * s(PRUNE_SLACK), s(f32::MAX));
+        let mut far = fmin8(prune_limit8(t_max), s(f32::MAX));
         let mut inverses = plain;
         for (k, (o, d)) in [(ox, dx), (oy, dy), (oz, dz)].into_iter().enumerate() {
             let inv = f32x8::ONE / d;
