@@ -54,7 +54,7 @@ pub fn decode_ray(b: &[u8]) -> Ray {
 /// Decodes a whole rays file.
 pub fn decode_rays(bytes: &[u8]) -> Result<Vec<Ray>> {
     ensure!(
-        bytes.len() % RAY_SIZE == 0,
+        bytes.len().is_multiple_of(RAY_SIZE),
         "truncated: {} bytes is not a whole number of {RAY_SIZE}-byte ray records ({} complete, {} bytes left over)",
         bytes.len(),
         bytes.len() / RAY_SIZE,
@@ -110,7 +110,7 @@ pub fn decode_hit(b: &[u8]) -> HitRecord {
 
 pub fn decode_hits(bytes: &[u8]) -> Result<Vec<HitRecord>> {
     ensure!(
-        bytes.len() % HIT_SIZE == 0,
+        bytes.len().is_multiple_of(HIT_SIZE),
         "truncated: {} bytes is not a whole number of {HIT_SIZE}-byte hit records",
         bytes.len()
     );

@@ -210,7 +210,7 @@ impl Device {
                 ));
             }
         }
-        if info.offset % 256 != 0 {
+        if !info.offset.is_multiple_of(256) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureCreateInfoKHR-offset-03734",
                 at,

@@ -25,18 +25,18 @@ fn mixed_blas(r: &mut generate::Rand) -> hostas_testkit::BlasDesc {
     let strip = loop {
         // `random_triangles` makes a strip for some seeds: the one geometry here that is.
         let g = generate::random_triangles(r, 500, false);
-        if let hostas_testkit::GeometryDesc::Triangles { positions, .. } = &g {
-            if positions.len() < 600 {
-                break g;
-            }
+        if let hostas_testkit::GeometryDesc::Triangles { positions, .. } = &g
+            && positions.len() < 600
+        {
+            break g;
         }
     };
     let soup = loop {
         let g = generate::random_triangles(r, 300, false);
-        if let hostas_testkit::GeometryDesc::Triangles { indices, .. } = &g {
-            if indices.is_empty() {
-                break g;
-            }
+        if let hostas_testkit::GeometryDesc::Triangles { indices, .. } = &g
+            && indices.is_empty()
+        {
+            break g;
         }
     };
     hostas_testkit::BlasDesc {
@@ -147,10 +147,10 @@ fn triangles_that_share_nothing_and_fast_builds_stay_direct() {
     let mut r = generate::rng(3);
     let soup = loop {
         let g = generate::random_triangles(&mut r, 400, false);
-        if let hostas_testkit::GeometryDesc::Triangles { positions, .. } = &g {
-            if positions.len() >= 1200 {
-                break g;
-            }
+        if let hostas_testkit::GeometryDesc::Triangles { positions, .. } = &g
+            && positions.len() >= 1200
+        {
+            break g;
         }
     };
     let soup = hostas_testkit::BlasDesc {

@@ -271,7 +271,7 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
                 }
             }
         }
-    } else if is_f32 && s.u8() % 4 != 0 {
+    } else if is_f32 && !s.u8().is_multiple_of(4) {
         for i in 0..nverts {
             for k in 0..(vsize as usize / 4) {
                 let v = coord(s, dirty);
@@ -309,7 +309,7 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
     } else {
         s.count(16)
     };
-    if index_type == vk::IndexType::NONE_KHR && !procedural_mode && s.u8() % 2 == 0 {
+    if index_type == vk::IndexType::NONE_KHR && !procedural_mode && s.u8().is_multiple_of(2) {
         prims = nverts as u32 / 3;
     }
     let first_vertex = match s.u8() % 6 {
@@ -360,7 +360,7 @@ fn triangles(s: &mut Source, dirty: &mut bool) -> (GeomData, BuildRangeInfo) {
     } else {
         16 * s.below(2)
     };
-    let transform = if s.u8() % 4 == 0 {
+    let transform = if s.u8().is_multiple_of(4) {
         let rows = transform_rows(s, dirty);
         let mut t = vec![0u8; transform_offset.min(256) as usize];
         t.extend(rows.iter().flat_map(|f| f.to_le_bytes()));
@@ -562,7 +562,7 @@ fn info(
     index: usize,
 ) -> InfoDesc {
     // An update of a structure an earlier call built, with the same description and new data.
-    if !earlier.is_empty() && s.u8() % 3 == 0 {
+    if !earlier.is_empty() && s.u8().is_multiple_of(3) {
         let k = s.below(earlier.len() as u32) as u8;
         let mut d = earlier[k as usize].clone();
         d.mode = if s.chance(240) {
@@ -587,11 +587,11 @@ fn info(
                 GeomData::Triangles {
                     vertices, indices, ..
                 } => {
-                    if s.chance(32) {
-                        if let Some(ix) = indices {
-                            for b in ix.iter_mut().take(64) {
-                                *b ^= s.u8() & 1;
-                            }
+                    if s.chance(32)
+                        && let Some(ix) = indices
+                    {
+                        for b in ix.iter_mut().take(64) {
+                            *b ^= s.u8() & 1;
                         }
                     }
                     vertices

@@ -207,19 +207,18 @@ fn exercise_with(fx: &Fixture, a: AccelerationStructure, lcg: &mut Lcg, trusted:
         }
         created.push(c);
     }
-    if stats.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw() != 0 {
-        if let Ok(c) = create(
+    if stats.build_flags & vk::BuildAccelerationStructureFlagsKHR::ALLOW_COMPACTION.as_raw() != 0
+        && let Ok(c) = create(
             d,
             vk::AccelerationStructureTypeKHR::GENERIC,
             stats.used_bytes,
-        ) {
-            let r =
-                d.copy_acceleration_structure(a, c, vk::CopyAccelerationStructureModeKHR::COMPACT);
-            if stats.used_bytes <= MAX_ALLOC {
-                r.expect("compact into an exactly sized destination");
-            }
-            created.push(c);
+        )
+    {
+        let r = d.copy_acceleration_structure(a, c, vk::CopyAccelerationStructureModeKHR::COMPACT);
+        if stats.used_bytes <= MAX_ALLOC {
+            r.expect("compact into an exactly sized destination");
         }
+        created.push(c);
     }
 
     let rays = probe_rays(header.bounds.lo, header.bounds.hi);
@@ -439,7 +438,7 @@ fn update_from_records(
         .collect();
     let flags = vk::BuildAccelerationStructureFlagsKHR::from_raw(h.build_flags);
     // In place, or into a new destination of the source's size.
-    let dst = if lcg.byte() % 2 == 0 {
+    let dst = if lcg.byte().is_multiple_of(2) {
         Some(a)
     } else {
         create(d, vk::AccelerationStructureTypeKHR::GENERIC, h.used_size).ok()

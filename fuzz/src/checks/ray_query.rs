@@ -286,7 +286,7 @@ fn check_ray(
                 }
             }
             _ => {
-                if s.u8() % 4 == 0 {
+                if s.u8().is_multiple_of(4) {
                     accept_all = false;
                     terminated = true;
                     q.terminate();

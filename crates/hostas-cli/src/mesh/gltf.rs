@@ -293,7 +293,7 @@ impl Output {
                     .map(|i| u32::try_from(i).map_err(|_| invalid("too many vertices".to_owned())))
                     .collect::<Result<_, _>>()?,
             };
-            if corners.len() % 3 != 0 {
+            if !corners.len().is_multiple_of(3) {
                 return Err(invalid(format!(
                     "{} indices, not a multiple of 3",
                     corners.len()

@@ -222,16 +222,16 @@ impl Device {
                             format!("instance references {r:#x}, the destination of info {j}"),
                         ));
                     }
-                    if let Ok(obj) = self.object(AccelerationStructure(r)) {
-                        if let Some(j) = dsts.iter().position(|d| overlaps(d, &obj)) {
-                            return Err(Error::vuid(
-                                "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706",
-                                at,
-                                format!(
-                                    "the referenced structure {r:#x} overlaps the destination of info {j}"
-                                ),
-                            ));
-                        }
+                    if let Ok(obj) = self.object(AccelerationStructure(r))
+                        && let Some(j) = dsts.iter().position(|d| overlaps(d, &obj))
+                    {
+                        return Err(Error::vuid(
+                            "VUID-vkBuildAccelerationStructuresKHR-dstAccelerationStructure-03706",
+                            at,
+                            format!(
+                                "the referenced structure {r:#x} overlaps the destination of info {j}"
+                            ),
+                        ));
                     }
                 }
             }

@@ -211,7 +211,7 @@ impl Device {
                 format!("mode {mode:?} is not SERIALIZE"),
             ));
         }
-        if dst.as_ptr() as usize % 16 != 0 {
+        if !(dst.as_ptr() as usize).is_multiple_of(16) {
             return Err(Error::vuid(
                 "VUID-vkCopyAccelerationStructureToMemoryKHR-pInfo-03751",
                 at,
@@ -270,7 +270,7 @@ impl Device {
                 format!("mode {mode:?} is not DESERIALIZE"),
             ));
         }
-        if src.as_ptr() as usize % 16 != 0 {
+        if !(src.as_ptr() as usize).is_multiple_of(16) {
             return Err(Error::vuid(
                 "VUID-vkCopyMemoryToAccelerationStructureKHR-pInfo-03750",
                 at,
@@ -414,7 +414,7 @@ impl Device {
                 ));
             }
         };
-        if stride % 8 != 0 {
+        if !stride.is_multiple_of(8) {
             return Err(Error::vuid(
                 stride_vuid,
                 at,

@@ -15,7 +15,7 @@ pub struct AabbReader<'a> {
 
 impl<'a> AabbReader<'a> {
     pub fn new(data: &AabbsData<'a>, range: &BuildRangeInfo, location: Location) -> Result<Self> {
-        if data.stride % 8 != 0 {
+        if !data.stride.is_multiple_of(8) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureGeometryAabbsDataKHR-stride-03545",
                 location,
@@ -29,7 +29,7 @@ impl<'a> AabbReader<'a> {
                 format!("stride {} is larger than 2^32-1", data.stride),
             ));
         }
-        if range.primitive_offset % 8 != 0 {
+        if !range.primitive_offset.is_multiple_of(8) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03659",
                 location,

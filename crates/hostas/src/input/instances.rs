@@ -68,7 +68,7 @@ impl<'a> InstanceReader<'a> {
         range: &BuildRangeInfo,
         location: Location,
     ) -> Result<Self> {
-        if range.primitive_offset % 16 != 0 {
+        if !range.primitive_offset.is_multiple_of(16) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03660",
                 location,

@@ -147,7 +147,10 @@ impl<'a> TriangleReader<'a> {
                 ));
             }
         };
-        if data.vertex_stride % format.component_size as u64 != 0 {
+        if !data
+            .vertex_stride
+            .is_multiple_of(format.component_size as u64)
+        {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureGeometryTrianglesDataKHR-vertexStride-03735",
                 location,
@@ -179,7 +182,7 @@ impl<'a> TriangleReader<'a> {
             ));
         }
         let primitive_offset = range.primitive_offset as u64;
-        if index_size != 0 && primitive_offset % index_size != 0 {
+        if index_size != 0 && !primitive_offset.is_multiple_of(index_size) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03656",
                 location,
@@ -189,7 +192,7 @@ impl<'a> TriangleReader<'a> {
                 ),
             ));
         }
-        if index_size == 0 && primitive_offset % format.offset_alignment() as u64 != 0 {
+        if index_size == 0 && !primitive_offset.is_multiple_of(format.offset_alignment() as u64) {
             return Err(Error::vuid(
                 "VUID-VkAccelerationStructureBuildRangeInfoKHR-primitiveOffset-03657",
                 location,
@@ -204,7 +207,7 @@ impl<'a> TriangleReader<'a> {
         let transform = match data.transform_data {
             None => None,
             Some(bytes) => {
-                if range.transform_offset % 16 != 0 {
+                if !range.transform_offset.is_multiple_of(16) {
                     return Err(Error::vuid(
                         "VUID-VkAccelerationStructureBuildRangeInfoKHR-transformOffset-03658",
                         location,
@@ -362,11 +365,11 @@ impl<'a> TriangleReader<'a> {
         let at = base + v * self.data.vertex_stride;
         let start = usize::try_from(at).unwrap_or(usize::MAX);
         // The common format, read directly.
-        if self.format.format == vk::Format::R32G32B32_SFLOAT {
-            if let Some(b) = self.data.vertex_data.get(start..start.saturating_add(12)) {
-                let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
-                return Ok([f(0), f(4), f(8)]);
-            }
+        if self.format.format == vk::Format::R32G32B32_SFLOAT
+            && let Some(b) = self.data.vertex_data.get(start..start.saturating_add(12))
+        {
+            let f = |i: usize| f32::from_le_bytes([b[i], b[i + 1], b[i + 2], b[i + 3]]);
+            return Ok([f(0), f(4), f(8)]);
         }
         self.data
             .vertex_data
@@ -431,12 +434,12 @@ impl<'a> TriangleReader<'a> {
             out[3 * k + 1] = f32::from_le_bytes([b[4], b[5], b[6], b[7]]);
             out[3 * k + 2] = f32::from_le_bytes([b[8], b[9], b[10], b[11]]);
         }
-        if let Some(t) = &self.transform {
-            if !(out[0].is_nan() || out[3].is_nan() || out[6].is_nan()) {
-                for k in 0..3 {
-                    let p = t.point([out[3 * k], out[3 * k + 1], out[3 * k + 2]]);
-                    out[3 * k..3 * k + 3].copy_from_slice(&p);
-                }
+        if let Some(t) = &self.transform
+            && !(out[0].is_nan() || out[3].is_nan() || out[6].is_nan())
+        {
+            for k in 0..3 {
+                let p = t.point([out[3 * k], out[3 * k + 1], out[3 * k + 2]]);
+                out[3 * k..3 * k + 3].copy_from_slice(&p);
             }
         }
         Some(out)
