@@ -1019,6 +1019,31 @@ fn closest_batch_reports_invalid_rays() {
         assert_eq!(err.location(), Some(Location::NONE.ray(1)), "{err}");
         assert!(err.to_string().ends_with("(ray 1)"), "{err}");
     }
+    // A camera's rows, walked in blocks of 2 x 4 pixels (rays 0, 1, 16, 17, 32, 33, 48, 49
+    // first): the first invalid ray in the batch's order is the one reported.
+    let mut camera: Vec<Ray> = (0..16 * 8)
+        .map(|p| {
+            let (x, y) = ((p % 16) as f32, (p / 16) as f32);
+            Ray::new([0.5, 0.5, 4.0], [x / 32.0 - 0.25, 0.125 - y / 32.0, -1.0])
+        })
+        .collect();
+    for (i, r) in camera.iter_mut().enumerate() {
+        if i == 34 || i == 49 {
+            (r.t_min, r.t_max) = (2.0, 1.0);
+        }
+    }
+    let inverted = scene.trace_closest(&camera[34]).unwrap_err();
+    for mode in modes {
+        let err = tracer
+            .closest_batch_with(&camera, &mut hits, mode)
+            .unwrap_err();
+        assert_eq!(err.vuid_str(), inverted.vuid_str());
+        assert_eq!(
+            err.location(),
+            Some(Location::NONE.ray(34)),
+            "{mode:?}: {err}"
+        );
+    }
     // Across the chunks `trace_batch` splits a batch into, closest and any hit alike.
     let mut rays = vec![good; 5000];
     rays[3333] = bad;

@@ -10,6 +10,7 @@ mod packet;
 mod query;
 mod scene;
 mod screen;
+mod tile;
 mod tracer;
 pub mod triangle;
 

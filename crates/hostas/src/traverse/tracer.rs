@@ -14,6 +14,7 @@ use super::query::{
 };
 use super::scene::{Hit, HitKind, Scene};
 use super::screen::{self, RootBox, Screened};
+use super::tile;
 use super::triangle::{ShearedRay, TriangleHit, by_permutation, permutation};
 use super::{Ray, RayFlags};
 use crate::error::Result;
@@ -43,6 +44,10 @@ pub struct Tracer<'s> {
     order: Vec<u32>,
     classes: Vec<u8>,
     stacks: Vec<BlasStack>,
+    /// A camera's batch in the order its packets walk it ([`tile::to_blocks`]), and its hits
+    /// in that order, kept for the next batch.
+    tiled: Vec<Ray>,
+    tiled_hits: Vec<Hit>,
     /// What [`Tracer::closest_batch`]'s packets work in for batches shorter than
     /// [`LOCAL_PACKETS_FROM`], kept for the next.
     packet_work: Option<Box<Packets>>,
@@ -51,6 +56,10 @@ pub struct Tracer<'s> {
     /// Rays traced one at a time, the packets before them in their batch (or in a recent
     /// batch) having fallen apart (for the tests).
     alone_after_judging: usize,
+    /// Whether [`Interleave::Auto`] walks a camera's next batch in blocks of pixels: its last
+    /// batch's packets held together to their leaves but split often on the way
+    /// ([`packet::split_often`]).
+    in_blocks: bool,
     /// Batches still to trace one at a time without judging their packets, the last judged
     /// batch's having fallen apart (see [`APART_FOR`]).
     apart_for: u32,
@@ -225,8 +234,10 @@ pub enum Interleave {
     /// 1M-triangle soup's and boxes' primary rays 1.09-1.15x as fast, Sponza's and Sibenik's
     /// 1.04-1.09x, the other meshes' about as fast), the rest of a batch (and the tracer's next
     /// seven batches) one at a time once its packets are seen to fall apart before their
-    /// leaves (the 1M-triangle sphere's, whose packets alone were 0.94-0.96x as fast), and
-    /// other rays interleaved through a bottom level of 16 MiB or more (used).
+    /// leaves (the 1M-triangle sphere's, whose packets alone were 0.94-0.96x as fast), a
+    /// camera's rows in blocks of 2 x 4 pixels after a batch whose packets split often on the
+    /// way to their leaves (the soup's, boxes', the bunny's), and other rays interleaved
+    /// through a bottom level of 16 MiB or more (used).
     #[default]
     Auto,
     /// Several at once wherever the scene allows (one identity instance of triangles; rays
@@ -237,7 +248,9 @@ pub enum Interleave {
     Never,
     /// Closest hits of coherent rays (a camera's, next to each other in the batch) in packets
     /// of up to eight, wherever the scene allows (as `Always`; the other rays, and first hits,
-    /// one at a time), as `Auto` walks a batch whose rays mostly share an origin.
+    /// one at a time), as `Auto` walks a batch whose rays mostly share an origin; a camera's
+    /// rows always in blocks of 2 x 4 pixels (`Auto` chooses blocks by how its packets held
+    /// together).
     Packets,
 }
 
@@ -272,14 +285,23 @@ const MAX_BATCH: usize = 1 << 30;
 
 /// Whether most consecutive rays of `rays` start at the same point (a camera's primary rays):
 /// such rays visit the same nodes one after another, which one ray at a time finds in the
-/// caches (interleaved, the soup's and boxes' primary rays were 0.77-0.88x as fast).
+/// caches (interleaved, the soup's and boxes' primary rays were 0.77-0.88x as fast). Judged
+/// by [`ORIGIN_PAIRS`] pairs of neighbours spread evenly over the batch, their origins compared
+/// bit for bit (comparing every pair cost the conference's incoherent rays 0.5% of their
+/// instructions under callgrind).
 fn share_origins(rays: &[Ray]) -> bool {
-    let shared = rays
-        .windows(2)
-        .filter(|w| w[0].origin == w[1].origin)
-        .count();
-    2 * shared >= rays.len()
+    let stride = (rays.len() / ORIGIN_PAIRS).max(1);
+    let bits = |r: &Ray| r.origin.map(f32::to_bits);
+    let (mut pairs, mut shared) = (0, 0);
+    for w in rays.windows(2).step_by(stride) {
+        pairs += 1;
+        shared += usize::from(bits(&w[0]) == bits(&w[1]));
+    }
+    pairs > 0 && 2 * shared >= pairs
 }
+
+/// How many pairs of neighbours [`share_origins`] compares.
+const ORIGIN_PAIRS: usize = 64;
 
 /// The hit found so far.
 #[derive(Clone, Copy)]
@@ -368,9 +390,12 @@ impl<'s> Tracer<'s> {
             order: Vec::new(),
             classes: Vec::new(),
             stacks: Vec::new(),
+            tiled: Vec::new(),
+            tiled_hits: Vec::new(),
             packet_work: None,
             retraced: 0,
             alone_after_judging: 0,
+            in_blocks: false,
             apart_for: 0,
         }
     }
@@ -566,12 +591,36 @@ impl<'s> Tracer<'s> {
     /// case (no culling or first-hit flags, the instance's mask met, a direction with a finite
     /// inverse) with one axis permutation, one origin and the same signs of direction
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
-    /// the coherent ones). A ray that reaches no child of the root is a miss, gathered in no
+    /// the coherent ones), or where the batch is a camera's rows, in blocks of pixels
+    /// ([`tile::to_blocks`]). A ray that reaches no child of the root is a miss, gathered in no
     /// packet. The other rays, and a packet's rays that met a tie, are traced one at a time.
     /// With `adapt`, once the batch's packets so far mostly fell apart before their leaves
     /// ([`fell_apart`]), its other rays are traced one at a time, and so are the next
-    /// [`APART_FOR`] batches, unjudged.
+    /// [`APART_FOR`] batches, unjudged; and a camera's rows go in blocks only after a batch
+    /// whose packets held together but split often ([`Tracer::in_blocks`]).
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
+        let blocks = !adapt || self.in_blocks;
+        let Some(width) = tile::row_length(rays).filter(|_| blocks) else {
+            return self.packets_in_order(rays, hits, adapt);
+        };
+        // A camera's rows: walked from a copy of the batch in blocks of pixels (the walk reads
+        // its rays eight at a time, consecutive), the hits put back in the batch's order.
+        let mut tiled = std::mem::take(&mut self.tiled);
+        let mut found = std::mem::take(&mut self.tiled_hits);
+        tile::to_blocks(rays, width, &mut tiled);
+        let result = self.packets_in_order(&tiled, &mut found, adapt);
+        tile::from_blocks(&found, width, hits);
+        (self.tiled, self.tiled_hits) = (tiled, found);
+        result.map_err(|e| {
+            // The first invalid ray in the batch's order, as its own order would find it.
+            let mut each = rays.iter().enumerate();
+            let first = each.find_map(|(i, r)| r.validate().err().map(|e| e.in_ray(i)));
+            first.unwrap_or(e)
+        })
+    }
+
+    /// [`Tracer::packets`], the rays gathered in the batch's order.
+    fn packets_in_order(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
         if adapt && self.apart_for > 0 && rays.len() >= LOCAL_STACK_FROM {
@@ -636,8 +685,10 @@ impl<'s> Tracer<'s> {
             walked
         };
         let mut result = Ok(());
-        // (How the batch's packets held together, counted until judged.)
+        // (How the batch's packets held together, counted until judged, and over the batch.)
         let mut so_far = Walked::default();
+        let (mut whole, mut packets) = (Walked::default(), 0);
+        let judge = adapt;
         let mut adapt = adapt;
         let mut screen = Screened::default();
         for (i, r) in rays.iter().enumerate() {
@@ -664,12 +715,15 @@ impl<'s> Tracer<'s> {
                 gathered = work.gather(i as u32, r, perm);
                 if gathered == packet::Gather::Apart {
                     let walked = walk(work, hits);
+                    whole.add(&walked);
+                    packets += 1;
                     if adapt {
                         so_far.add(&walked);
                         if let Some(apart) = fell_apart(&so_far) {
                             adapt = false;
                             self.apart_for = if apart { APART_FOR } else { 0 };
                             if apart {
+                                self.in_blocks = false;
                                 // The rest one at a time, from this ray.
                                 let rest = (rays.get(i..), hits.get_mut(i..));
                                 if let (Some(rest), Some(rest_hits)) = rest {
@@ -702,7 +756,11 @@ impl<'s> Tracer<'s> {
             }
         }
         if result.is_ok() && !work.gathered().0.is_empty() {
-            walk(work, hits);
+            whole.add(&walk(work, hits));
+            packets += 1;
+        }
+        if judge && result.is_ok() && self.apart_for == 0 {
+            self.in_blocks = packet::split_often(&whole, packets);
         }
         work.clear();
         self.retraced += retraced;
@@ -710,10 +768,10 @@ impl<'s> Tracer<'s> {
     }
 
     fn blas(&mut self, index: u32) -> Option<View<'s>> {
-        if let Some((i, v)) = self.cached {
-            if i == index {
-                return Some(v);
-            }
+        if let Some((i, v)) = self.cached
+            && i == index
+        {
+            return Some(v);
         }
         let v = self.scene.blas_view(index)?;
         self.cached = Some((index, v));
@@ -1095,13 +1153,14 @@ fn nearest_one_by_one<const P: usize, const FIRST: bool>(
     best: &mut Option<(u32, TriangleHit)>,
 ) {
     for (k, tri) in (base..).zip(tris) {
-        if let Some(h) = ray.intersect_axes::<P>(tri) {
-            if h.t > t_min && h.t < *t_max {
-                *t_max = h.t;
-                *best = Some((k, h));
-                if FIRST {
-                    return;
-                }
+        if let Some(h) = ray.intersect_axes::<P>(tri)
+            && h.t > t_min
+            && h.t < *t_max
+        {
+            *t_max = h.t;
+            *best = Some((k, h));
+            if FIRST {
+                return;
             }
         }
     }
@@ -1342,16 +1401,16 @@ fn culled(
     front: Option<bool>,
 ) -> bool {
     let iflags = vk::GeometryInstanceFlagsKHR::from_raw(inst.flags);
-    if let Some(front) = front {
-        if !iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE) {
-            let rule = if front {
-                RayFlags::CULL_FRONT_FACING_TRIANGLES
-            } else {
-                RayFlags::CULL_BACK_FACING_TRIANGLES
-            };
-            if flags.contains(rule) {
-                return true;
-            }
+    if let Some(front) = front
+        && !iflags.contains(vk::GeometryInstanceFlagsKHR::TRIANGLE_FACING_CULL_DISABLE)
+    {
+        let rule = if front {
+            RayFlags::CULL_FRONT_FACING_TRIANGLES
+        } else {
+            RayFlags::CULL_BACK_FACING_TRIANGLES
+        };
+        if flags.contains(rule) {
+            return true;
         }
     }
     if !flags.intersects(RayFlags::CULL_OPAQUE | RayFlags::CULL_NO_OPAQUE) {
@@ -1616,6 +1675,79 @@ mod tests {
                 hit_count += usize::from(hit.is_hit());
             }
             assert_eq!(hit_count, rays.len());
+        }
+    }
+
+    /// Under `Interleave::Auto`, a camera's batch over a soup of small random triangles (whose
+    /// packets reach their leaves together but split often on the way) sends the camera's next
+    /// batch in blocks of pixels; over one large quad (packets that never split), in rows.
+    /// Either way every hit is the one `Tracer::closest` gives.
+    #[test]
+    fn a_camera_whose_packets_split_often_goes_in_blocks() {
+        let device = crate::Device::new();
+        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        let soup: Vec<[f32; 3]> = (0..20_000)
+            .flat_map(|_| {
+                let c: [f32; 3] = std::array::from_fn(|_| rng.gen_range(0.0f32..1.0));
+                let corners: [[f32; 3]; 3] = std::array::from_fn(|_| {
+                    std::array::from_fn(|k| c[k] + rng.gen_range(-0.02..0.02))
+                });
+                corners
+            })
+            .collect();
+        let quad = vec![
+            [0.0, 0.0, 0.5],
+            [1.0, 0.0, 0.5],
+            [0.0, 1.0, 0.5],
+            [1.0, 1.0, 0.5],
+        ];
+        // A 64 x 64 image of the unit square, row by row.
+        let w = 64;
+        let origin = [0.5, 0.5, 3.0];
+        let rays: Vec<Ray> = (0..w * w)
+            .map(|k| {
+                let at = [
+                    (k % w) as f32 / w as f32,
+                    1.0 - (k / w) as f32 / w as f32,
+                    0.5,
+                ];
+                Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
+            })
+            .collect();
+        for (positions, blocks) in [(soup, true), (quad, false)] {
+            let indices: Vec<[u32; 3]> = if positions.len() == 4 {
+                vec![[0, 1, 2], [1, 3, 2]]
+            } else {
+                (0..positions.len() as u32 / 3)
+                    .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+                    .collect()
+            };
+            let blas =
+                crate::quick::build_triangle_blas(&device, &positions, &indices, flags).unwrap();
+            let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
+            let scene = device.scene(tlas).unwrap();
+            let mut tracer = Tracer::new(&scene);
+            let mut hits = Vec::new();
+            assert!(!tracer.in_blocks);
+            tracer
+                .closest_batch_with(&rays, &mut hits, Interleave::Auto)
+                .unwrap();
+            assert_eq!(tracer.in_blocks, blocks, "{} triangles", indices.len());
+            assert_eq!(tracer.apart_for, 0);
+            // The next batch, in blocks where judged so, and judged again.
+            let mut again = Vec::new();
+            tracer
+                .closest_batch_with(&rays, &mut again, Interleave::Auto)
+                .unwrap();
+            assert_eq!(tracer.in_blocks, blocks, "{} triangles", indices.len());
+            assert_eq!(again, hits);
+            let mut hit_count = 0;
+            for (ray, hit) in rays.iter().zip(&hits) {
+                assert_eq!(*hit, scene.trace_closest(ray).unwrap());
+                hit_count += usize::from(hit.is_hit());
+            }
+            assert!(hit_count > rays.len() / 2, "{hit_count} hits");
         }
     }
 
