@@ -1556,6 +1556,14 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
 
+    /// A fast-trace scene of one identity instance of `positions` and `indices`.
+    fn scene_of(device: &crate::Device, positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Scene {
+        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
+        let blas = crate::quick::build_triangle_blas(device, positions, indices, flags).unwrap();
+        let tlas = crate::quick::build_single_instance_tlas(device, blas).unwrap();
+        device.scene(tlas).unwrap()
+    }
+
     /// A packet notes the rays that meet a candidate at exactly their hit's distance, and
     /// only those are traced again on their own: two copies of one triangle (a leaf of two,
     /// tested one triangle at a time: every hit on it ties), eight rays from one point at it
@@ -1566,10 +1574,7 @@ mod tests {
         let positions: Vec<[f32; 3]> = [tri, tri].concat();
         let indices = [[0, 1, 2], [3, 4, 5]];
         let device = crate::Device::new();
-        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
-        let blas = crate::quick::build_triangle_blas(&device, &positions, &indices, flags).unwrap();
-        let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
-        let scene = device.scene(tlas).unwrap();
+        let scene = scene_of(&device, &positions, &indices);
         let origin = [0.5, 0.5, 4.0];
         let rays: Vec<Ray> = [0.0f32, 3.0]
             .iter()
@@ -1627,7 +1632,6 @@ mod tests {
             })
             .collect();
         let device = crate::Device::new();
-        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
         // Cells of 1/128 (rays about 1/32 apart), then one cell.
         for (n, mode, apart) in [
             (128, Interleave::Auto, true),
@@ -1635,10 +1639,7 @@ mod tests {
             (1, Interleave::Auto, false),
         ] {
             let (positions, indices) = quad(n);
-            let blas =
-                crate::quick::build_triangle_blas(&device, &positions, &indices, flags).unwrap();
-            let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
-            let scene = device.scene(tlas).unwrap();
+            let scene = scene_of(&device, &positions, &indices);
             let mut tracer = Tracer::new(&scene);
             let mut hits = Vec::new();
             tracer.closest_batch_with(&rays, &mut hits, mode).unwrap();
@@ -1685,7 +1686,6 @@ mod tests {
     #[test]
     fn a_camera_whose_packets_split_often_goes_in_blocks() {
         let device = crate::Device::new();
-        let flags = vk::BuildAccelerationStructureFlagsKHR::PREFER_FAST_TRACE;
         let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
         let soup: Vec<[f32; 3]> = (0..20_000)
             .flat_map(|_| {
@@ -1723,10 +1723,7 @@ mod tests {
                     .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
                     .collect()
             };
-            let blas =
-                crate::quick::build_triangle_blas(&device, &positions, &indices, flags).unwrap();
-            let tlas = crate::quick::build_single_instance_tlas(&device, blas).unwrap();
-            let scene = device.scene(tlas).unwrap();
+            let scene = scene_of(&device, &positions, &indices);
             let mut tracer = Tracer::new(&scene);
             let mut hits = Vec::new();
             assert!(!tracer.in_blocks);
