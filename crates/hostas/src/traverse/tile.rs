@@ -31,7 +31,10 @@ const MAX_ROW: usize = 4096;
 /// last whole band in their order. [`from_blocks`] undoes it.
 pub(super) fn to_blocks<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) {
     resize_like(items, out);
-    let band = width * HIGH;
+    let Some(band) = band_of(width) else {
+        out.copy_from_slice(items);
+        return;
+    };
     for (from, to) in items.chunks_exact(band).zip(out.chunks_exact_mut(band)) {
         let (Some([r0, r1, r2, r3]), (blocks, _)) = (rows(from, width), to.as_chunks_mut()) else {
             continue;
@@ -48,7 +51,10 @@ pub(super) fn to_blocks<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) {
 /// into `out`.
 pub(super) fn from_blocks<T: Copy>(blocks: &[T], width: usize, out: &mut Vec<T>) {
     resize_like(blocks, out);
-    let band = width * HIGH;
+    let Some(band) = band_of(width) else {
+        out.copy_from_slice(blocks);
+        return;
+    };
     for (from, to) in blocks.chunks_exact(band).zip(out.chunks_exact_mut(band)) {
         let ((each, _), Some([r0, r1, r2, r3])) = (from.as_chunks(), rows_mut(to, width)) else {
             continue;
@@ -59,6 +65,12 @@ pub(super) fn from_blocks<T: Copy>(blocks: &[T], width: usize, out: &mut Vec<T>)
         }
     }
     copy_tail(blocks, band, out);
+}
+
+/// The length of a band of [`HIGH`] rows `width` long; `None` for a width that makes no
+/// blocks (zero or not a multiple of [`WIDE`]: the items keep their order).
+fn band_of(width: usize) -> Option<usize> {
+    (width > 0 && width.is_multiple_of(WIDE)).then(|| width * HIGH)
 }
 
 /// `out` as long as `items` (its contents to be overwritten).
@@ -126,7 +138,7 @@ pub(super) fn row_length(rays: &[Ray]) -> Option<usize> {
             // Ray `k - 1` was the nearest: the pixel below the first.
             let width = k - 1;
             let square = last <= 4.0 * step;
-            let fits = (MIN_ROW..=longest).contains(&width) && width % WIDE == 0;
+            let fits = (MIN_ROW..=longest).contains(&width) && width.is_multiple_of(WIDE);
             return (square && fits).then_some(width);
         }
         last = now;
@@ -176,6 +188,13 @@ mod tests {
         let mut back = Vec::new();
         from_blocks(&order, 16, &mut back);
         assert_eq!(back, indices);
+        // No blocks of a width they cannot be made of.
+        for width in [0, 15] {
+            to_blocks(&indices, width, &mut order);
+            assert_eq!(order, indices);
+            from_blocks(&indices, width, &mut back);
+            assert_eq!(back, indices);
+        }
     }
 
     #[test]
