@@ -30,9 +30,7 @@ const MAX_ROW: usize = 4096;
 /// each band of [`HIGH`] rows a block at a time, each block's row by row; the items past the
 /// last whole band in their order. [`from_blocks`] undoes it.
 pub(super) fn to_blocks<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) {
-    resize_like(items, out);
-    let Some(band) = band_of(width) else {
-        out.copy_from_slice(items);
+    let Some(band) = copy_and_band(items, width, out) else {
         return;
     };
     for (from, to) in items.chunks_exact(band).zip(out.chunks_exact_mut(band)) {
@@ -44,15 +42,12 @@ pub(super) fn to_blocks<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) {
             *block = [a, b, c, d, e, f, g, h];
         }
     }
-    copy_tail(items, band, out);
 }
 
 /// `blocks` (in [`to_blocks`]'s order of a camera's rows `width` long) back in row order,
 /// into `out`.
 pub(super) fn from_blocks<T: Copy>(blocks: &[T], width: usize, out: &mut Vec<T>) {
-    resize_like(blocks, out);
-    let Some(band) = band_of(width) else {
-        out.copy_from_slice(blocks);
+    let Some(band) = copy_and_band(blocks, width, out) else {
         return;
     };
     for (from, to) in blocks.chunks_exact(band).zip(out.chunks_exact_mut(band)) {
@@ -64,29 +59,16 @@ pub(super) fn from_blocks<T: Copy>(blocks: &[T], width: usize, out: &mut Vec<T>)
             (*p0, *p1, *p2, *p3) = ([a, b], [c, d], [e, f], [g, h]);
         }
     }
-    copy_tail(blocks, band, out);
 }
 
-/// The length of a band of [`HIGH`] rows `width` long; `None` for a width that makes no
-/// blocks (zero or not a multiple of [`WIDE`]: the items keep their order).
-fn band_of(width: usize) -> Option<usize> {
-    (width > 0 && width.is_multiple_of(WIDE)).then(|| width * HIGH)
-}
-
-/// `out` as long as `items` (its contents to be overwritten).
-fn resize_like<T: Copy>(items: &[T], out: &mut Vec<T>) {
+/// `items` copied to `out` (to be rearranged there band by band: the items past the last
+/// whole band stay as they are), and the length of a band of [`HIGH`] rows `width` long;
+/// `None` for a width that makes no blocks (zero or not a multiple of [`WIDE`]), the copy
+/// then kept in the items' order.
+fn copy_and_band<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) -> Option<usize> {
     out.clear();
-    if let Some(&fill) = items.first() {
-        out.resize(items.len(), fill);
-    }
-}
-
-/// The items past the last whole band (`band` long) copied to `out`.
-fn copy_tail<T: Copy>(items: &[T], band: usize, out: &mut [T]) {
-    let tail = items.len() / band * band;
-    if let (Some(from), Some(to)) = (items.get(tail..), out.get_mut(tail..)) {
-        to.copy_from_slice(from);
-    }
+    out.extend_from_slice(items);
+    (width > 0 && width.is_multiple_of(WIDE)).then(|| width * HIGH)
 }
 
 /// A band's [`HIGH`] rows, `width` long, in pairs of pixels.

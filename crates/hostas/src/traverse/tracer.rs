@@ -599,8 +599,9 @@ impl<'s> Tracer<'s> {
     /// [`APART_FOR`] batches, unjudged; and a camera's rows go in blocks only after a batch
     /// whose packets held together but split often ([`Tracer::in_blocks`]).
     fn packets(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
+        // (Rows looked for only where blocks would be walked.)
         let blocks = !adapt || self.in_blocks;
-        let Some(width) = tile::row_length(rays).filter(|_| blocks) else {
+        let Some(width) = blocks.then(|| tile::row_length(rays)).flatten() else {
             return self.packets_in_order(rays, hits, adapt);
         };
         // A camera's rows: walked from a copy of the batch in blocks of pixels (the walk reads
@@ -1715,14 +1716,13 @@ mod tests {
                 Ray::new(origin, std::array::from_fn(|i| at[i] - origin[i]))
             })
             .collect();
-        for (positions, blocks) in [(soup, true), (quad, false)] {
-            let indices: Vec<[u32; 3]> = if positions.len() == 4 {
-                vec![[0, 1, 2], [1, 3, 2]]
-            } else {
-                (0..positions.len() as u32 / 3)
-                    .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
-                    .collect()
-            };
+        let soup_indices: Vec<[u32; 3]> = (0..soup.len() as u32 / 3)
+            .map(|t| [3 * t, 3 * t + 1, 3 * t + 2])
+            .collect();
+        let quad_indices = vec![[0, 1, 2], [1, 3, 2]];
+        for (positions, indices, blocks) in
+            [(soup, soup_indices, true), (quad, quad_indices, false)]
+        {
             let scene = scene_of(&device, &positions, &indices);
             let mut tracer = Tracer::new(&scene);
             let mut hits = Vec::new();
