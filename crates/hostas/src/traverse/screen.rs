@@ -62,15 +62,25 @@ impl RootBox {
         Some(b)
     }
 
+    /// The box from `lo` to `hi`, for the tests.
+    #[cfg(test)]
+    pub(super) fn around(lo: [f32; 3], hi: [f32; 3]) -> RootBox {
+        RootBox { lo, hi }
+    }
+
     /// Screens `rays` (at most the first [`LANES`]).
     #[inline(always)]
     pub(super) fn screen(&self, rays: &[Ray]) -> Screened {
         let Some(first) = rays.first() else {
             return Screened::default();
         };
-        let n = rays.len().min(LANES);
         // (Lanes past the last ray repeat the first, and are masked off.)
-        let ray = |k: usize| rays.get(k).unwrap_or(first);
+        self.screen_each(rays.len().min(LANES), |k| rays.get(k).unwrap_or(first))
+    }
+
+    /// Screens `n` rays (at most [`LANES`]), the `k`-th `ray(k)`.
+    #[inline(always)]
+    pub(super) fn screen_each<'r>(&self, n: usize, ray: impl Fn(usize) -> &'r Ray) -> Screened {
         let [ox, oy, oz, t_min, dx, dy, dz, t_max] = f32x8::transpose(std::array::from_fn(|k| {
             let r = ray(k);
             let ([x, y, z], [u, v, w]) = (r.origin, r.direction);

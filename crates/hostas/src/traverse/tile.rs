@@ -11,9 +11,11 @@
 //!
 //! A batch is taken for a camera's rows where its rays share the first ray's origin and,
 //! within a quarter of the batch, a ray's direction comes back next to the first ray's (the
-//! pixel below it). The order is only the walk's: each ray's hit is the one it finds alone.
+//! pixel below it). The order is only the walk's: each ray's hit is the one it finds alone,
+//! written at the ray's index.
 
 use super::Ray;
+use super::screen::{LANES, RootBox, Screened};
 
 /// A block's width and height in pixels (a packet's eight rays).
 const WIDE: usize = 2;
@@ -26,67 +28,76 @@ const MIN_ROW: usize = 8;
 /// The longest row looked for (the look costs a few instructions per ray of the row).
 const MAX_ROW: usize = 4096;
 
-/// `items` (a camera's rows, `width` long, a multiple of [`WIDE`]) block by block, into `out`:
-/// each band of [`HIGH`] rows a block at a time, each block's row by row; the items past the
-/// last whole band in their order. [`from_blocks`] undoes it.
-pub(super) fn to_blocks<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) {
-    let Some(band) = copy_and_band(items, width, out) else {
-        return;
-    };
-    for (from, to) in items.chunks_exact(band).zip(out.chunks_exact_mut(band)) {
-        let (Some([r0, r1, r2, r3]), (blocks, _)) = (rows(from, width), to.as_chunks_mut()) else {
-            continue;
-        };
-        let rows = r0.iter().zip(r1).zip(r2).zip(r3);
-        for (block, (((&[a, b], &[c, d]), &[e, f]), &[g, h])) in blocks.iter_mut().zip(rows) {
-            *block = [a, b, c, d, e, f, g, h];
+/// A camera's rows, `width` long, in the order in which packets walk them: each band of
+/// [`HIGH`] rows a block of [`WIDE`] x [`HIGH`] pixels at a time (each block's pixels row by
+/// row), then the rays past the last whole band in their order. The rays are read where they
+/// lie: copying them into this order and the hits back cost about 40 instructions a ray.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Blocks {
+    /// Where each of a block's pixels lies from its top left one.
+    offsets: [usize; LANES],
+    width: usize,
+    /// The end of the rays walked in blocks.
+    banded: usize,
+    /// The block walked, by its top left pixel, and the end of that pixel's row.
+    block: usize,
+    row_end: usize,
+}
+
+// (A block is what the screen takes at once.)
+const _: () = assert!(WIDE * HIGH == LANES);
+
+impl Blocks {
+    /// The rays of a batch `len` long, a camera's rows `width` long; in the batch's order for
+    /// a width that makes no blocks (zero or not a multiple of [`WIDE`]).
+    pub(super) fn new(len: usize, width: usize) -> Blocks {
+        let blocks = width > 0 && width.is_multiple_of(WIDE);
+        let band = width.saturating_mul(HIGH);
+        Blocks {
+            offsets: std::array::from_fn(|k| k / WIDE * width + k % WIDE),
+            width,
+            banded: if blocks { len / band * band } else { 0 },
+            block: 0,
+            row_end: width,
         }
     }
-}
 
-/// `blocks` (in [`to_blocks`]'s order of a camera's rows `width` long) back in row order,
-/// into `out`.
-pub(super) fn from_blocks<T: Copy>(blocks: &[T], width: usize, out: &mut Vec<T>) {
-    let Some(band) = copy_and_band(blocks, width, out) else {
-        return;
-    };
-    for (from, to) in blocks.chunks_exact(band).zip(out.chunks_exact_mut(band)) {
-        let ((each, _), Some([r0, r1, r2, r3])) = (from.as_chunks(), rows_mut(to, width)) else {
-            continue;
-        };
-        let rows = r0.iter_mut().zip(r1).zip(r2).zip(r3);
-        for (&[a, b, c, d, e, f, g, h], (((p0, p1), p2), p3)) in each.iter().zip(rows) {
-            (*p0, *p1, *p2, *p3) = ([a, b], [c, d], [e, f], [g, h]);
+    /// The batch's index of the ray at position `p` of the walk's order, asked for every
+    /// position in turn (`p` = 0, 1, 2...).
+    #[inline(always)]
+    pub(super) fn index(&mut self, p: usize) -> usize {
+        if p >= self.banded {
+            return p;
         }
+        let k = p % LANES;
+        if k == 0 && p > 0 {
+            self.block += WIDE;
+            if self.block == self.row_end {
+                // The band's end: the next band's first row.
+                self.block += (HIGH - 1) * self.width;
+                self.row_end = self.block + self.width;
+            }
+        }
+        self.block + self.offsets[k]
     }
-}
 
-/// `items` copied to `out` (to be rearranged there band by band: the items past the last
-/// whole band stay as they are), and the length of a band of [`HIGH`] rows `width` long;
-/// `None` for a width that makes no blocks (zero or not a multiple of [`WIDE`]), the copy
-/// then kept in the items' order.
-fn copy_and_band<T: Copy>(items: &[T], width: usize, out: &mut Vec<T>) -> Option<usize> {
-    out.clear();
-    out.extend_from_slice(items);
-    (width > 0 && width.is_multiple_of(WIDE)).then(|| width * HIGH)
-}
-
-/// A band's [`HIGH`] rows, `width` long, in pairs of pixels.
-fn rows<T>(band: &[T], width: usize) -> Option<[&[[T; WIDE]]; HIGH]> {
-    let (pairs, _) = band.as_chunks::<WIDE>();
-    let (r0, rest) = pairs.split_at_checked(width / WIDE)?;
-    let (r1, rest) = rest.split_at_checked(width / WIDE)?;
-    let (r2, r3) = rest.split_at_checked(width / WIDE)?;
-    Some([r0, r1, r2, r3])
-}
-
-/// [`rows`], to write.
-fn rows_mut<T>(band: &mut [T], width: usize) -> Option<[&mut [[T; WIDE]]; HIGH]> {
-    let (pairs, _) = band.as_chunks_mut::<WIDE>();
-    let (r0, rest) = pairs.split_at_mut_checked(width / WIDE)?;
-    let (r1, rest) = rest.split_at_mut_checked(width / WIDE)?;
-    let (r2, r3) = rest.split_at_mut_checked(width / WIDE)?;
-    Some([r0, r1, r2, r3])
+    /// Screens against `root` the [`LANES`] rays of `rays` (as many as there are) from
+    /// position `p` of the walk's order, the last one asked for ([`Blocks::index`]), a
+    /// multiple of [`LANES`].
+    #[inline(always)]
+    pub(super) fn screen(&self, root: &RootBox, rays: &[Ray], p: usize) -> Screened {
+        if p >= self.banded {
+            return root.screen(rays.get(p..).unwrap_or_default());
+        }
+        let Some(first) = rays.get(self.block) else {
+            return Screened::default();
+        };
+        let ray = |k: usize| {
+            rays.get(self.block + self.offsets[k % LANES])
+                .unwrap_or(first)
+        };
+        root.screen_each(LANES, ray)
+    }
 }
 
 /// The length of a camera's rows in `rays` (from its first ray, which may lie anywhere in
@@ -155,28 +166,79 @@ mod tests {
         }
     }
 
+    /// The indices `order` walks for a batch `len` long, position by position.
+    fn walked(mut order: Blocks, len: usize) -> Vec<usize> {
+        (0..len).map(|p| order.index(p)).collect()
+    }
+
     #[test]
     fn blocks_of_two_by_four_then_the_rest_in_order() {
         let rays = camera(16, 9, 0);
         assert_eq!(row_length(&rays), Some(16));
-        let indices: Vec<u32> = (0..144).collect();
-        let mut order = Vec::new();
-        to_blocks(&indices, 16, &mut order);
+        let order = walked(Blocks::new(144, 16), 144);
         assert_eq!(order[..8], [0, 1, 16, 17, 32, 33, 48, 49]);
         assert_eq!(order[8..16], [2, 3, 18, 19, 34, 35, 50, 51]);
+        assert_eq!(order[56..64], [14, 15, 30, 31, 46, 47, 62, 63]);
         // The second band of four rows, then the ninth row as it came.
         assert_eq!(order[64..72], [64, 65, 80, 81, 96, 97, 112, 113]);
-        assert_eq!(order[128..], indices[128..]);
-        let mut back = Vec::new();
-        from_blocks(&order, 16, &mut back);
-        assert_eq!(back, indices);
-        // No blocks of a width they cannot be made of.
-        for width in [0, 15] {
-            to_blocks(&indices, width, &mut order);
-            assert_eq!(order, indices);
-            from_blocks(&indices, width, &mut back);
-            assert_eq!(back, indices);
+        assert_eq!(order[128..], (128..144).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn every_ray_is_walked_once() {
+        for (len, width) in [
+            (0, 16),
+            (5, 16),
+            (63, 16),
+            (64, 16),
+            (1000, 8),
+            (1024, 256),
+            (1027, 2),
+        ] {
+            let mut each = walked(Blocks::new(len, width), len);
+            each.sort_unstable();
+            assert_eq!(each, (0..len).collect::<Vec<_>>(), "{len} x {width}");
         }
+        // No blocks of a width they cannot be made of: the batch's order.
+        for width in [0, 15] {
+            let order = walked(Blocks::new(64, width), 64);
+            assert_eq!(order, (0..64).collect::<Vec<_>>(), "width {width}");
+        }
+    }
+
+    #[test]
+    fn the_screen_takes_each_block() {
+        // Boxes around points of some rays: the screen finds the others outside, lane by
+        // lane in the walk's order (the first block's, then the ninth row's first eight).
+        let rays = camera(16, 9, 0);
+        let around = |some: &[usize]| {
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for &i in some {
+                let r = &rays[i];
+                for k in 0..3 {
+                    let p = r.origin[k] + r.direction[k];
+                    (lo[k], hi[k]) = (lo[k].min(p), hi[k].max(p));
+                }
+            }
+            RootBox::around(lo, hi)
+        };
+        let mut order = Blocks::new(rays.len(), 16);
+        order.index(0);
+        assert_eq!(
+            order.screen(&around(&[16, 17]), &rays, 0).outside,
+            0b1111_0011
+        );
+        assert_eq!(order.screen(&around(&[49]), &rays, 0).outside, 0b0111_1111);
+        for p in 1..=8 {
+            order.index(p);
+        }
+        assert_eq!(order.screen(&around(&[2]), &rays, 8).outside, 0b1111_1110);
+        for p in 9..=128 {
+            order.index(p);
+        }
+        let row = around(&[130, 131, 132, 133, 134, 135]);
+        assert_eq!(order.screen(&row, &rays, 128).outside, 0b0000_0011);
     }
 
     #[test]

@@ -14,7 +14,7 @@ use super::query::{
 };
 use super::scene::{Hit, HitKind, Scene};
 use super::screen::{self, RootBox, Screened};
-use super::tile;
+use super::tile::{self, Blocks};
 use super::triangle::{ShearedRay, TriangleHit, by_permutation, permutation};
 use super::{Ray, RayFlags};
 use crate::error::Result;
@@ -44,10 +44,6 @@ pub struct Tracer<'s> {
     order: Vec<u32>,
     classes: Vec<u8>,
     stacks: Vec<BlasStack>,
-    /// A camera's batch in the order its packets walk it ([`tile::to_blocks`]), and its hits
-    /// in that order, kept for the next batch.
-    tiled: Vec<Ray>,
-    tiled_hits: Vec<Hit>,
     /// What [`Tracer::closest_batch`]'s packets work in for batches shorter than
     /// [`LOCAL_PACKETS_FROM`], kept for the next.
     packet_work: Option<Box<Packets>>,
@@ -390,8 +386,6 @@ impl<'s> Tracer<'s> {
             order: Vec::new(),
             classes: Vec::new(),
             stacks: Vec::new(),
-            tiled: Vec::new(),
-            tiled_hits: Vec::new(),
             packet_work: None,
             retraced: 0,
             alone_after_judging: 0,
@@ -592,7 +586,7 @@ impl<'s> Tracer<'s> {
     /// inverse) with one axis permutation, one origin and the same signs of direction
     /// ([`packet::share_a_walk`]), in the batch's order (a camera's rays next to each other are
     /// the coherent ones), or where the batch is a camera's rows, in blocks of pixels
-    /// ([`tile::to_blocks`]). A ray that reaches no child of the root is a miss, gathered in no
+    /// ([`tile::Blocks`]). A ray that reaches no child of the root is a miss, gathered in no
     /// packet. The other rays, and a packet's rays that met a tie, are traced one at a time.
     /// With `adapt`, once the batch's packets so far mostly fell apart before their leaves
     /// ([`fell_apart`]), its other rays are traced one at a time, and so are the next
@@ -602,26 +596,29 @@ impl<'s> Tracer<'s> {
         // (Rows looked for only where blocks would be walked.)
         let blocks = !adapt || self.in_blocks;
         let Some(width) = blocks.then(|| tile::row_length(rays)).flatten() else {
-            return self.packets_in_order(rays, hits, adapt);
+            let in_order = Blocks::new(rays.len(), 0);
+            return self.packets_in_order::<false>(rays, hits, adapt, in_order);
         };
-        // A camera's rows: walked from a copy of the batch in blocks of pixels (the walk reads
-        // its rays eight at a time, consecutive), the hits put back in the batch's order.
-        let mut tiled = std::mem::take(&mut self.tiled);
-        let mut found = std::mem::take(&mut self.tiled_hits);
-        tile::to_blocks(rays, width, &mut tiled);
-        let result = self.packets_in_order(&tiled, &mut found, adapt);
-        tile::from_blocks(&found, width, hits);
-        (self.tiled, self.tiled_hits) = (tiled, found);
-        result.map_err(|e| {
-            // The first invalid ray in the batch's order, as its own order would find it.
-            let mut each = rays.iter().enumerate();
-            let first = each.find_map(|(i, r)| r.validate().err().map(|e| e.in_ray(i)));
-            first.unwrap_or(e)
-        })
+        // A camera's rows: walked in blocks of pixels, read where they lie.
+        let blocks = Blocks::new(rays.len(), width);
+        self.packets_in_order::<true>(rays, hits, adapt, blocks)
+            .map_err(|e| {
+                // The first invalid ray in the batch's order, as its own order would find it.
+                let mut each = rays.iter().enumerate();
+                let first = each.find_map(|(i, r)| r.validate().err().map(|e| e.in_ray(i)));
+                first.unwrap_or(e)
+            })
     }
 
-    /// [`Tracer::packets`], the rays gathered in the batch's order.
-    fn packets_in_order(&mut self, rays: &[Ray], hits: &mut Vec<Hit>, adapt: bool) -> Result<()> {
+    /// [`Tracer::packets`], the rays gathered in the batch's order, or with `BLOCKS` in the
+    /// order of `blocks`. (A constant, so that the batch's order keeps its plain loop.)
+    fn packets_in_order<const BLOCKS: bool>(
+        &mut self,
+        rays: &[Ray],
+        hits: &mut Vec<Hit>,
+        adapt: bool,
+        blocks: Blocks,
+    ) -> Result<()> {
         hits.clear();
         hits.resize(rays.len(), Hit::MISS);
         if adapt && self.apart_for > 0 && rays.len() >= LOCAL_STACK_FROM {
@@ -638,24 +635,25 @@ impl<'s> Tracer<'s> {
             // one-ray walk's stack, `Direct::trace_each`): on the heap, how far the two lay
             // apart modulo 4 KiB moved primary rays by up to 23% from process to process.
             let mut work = Packets::new();
-            return self.packets_in(&mut work, rays, hits, adapt);
+            return self.packets_in::<BLOCKS>(&mut work, rays, hits, adapt, blocks);
         }
         let mut work = self
             .packet_work
             .take()
             .unwrap_or_else(|| Box::new(Packets::new()));
-        let result = self.packets_in(&mut work, rays, hits, adapt);
+        let result = self.packets_in::<BLOCKS>(&mut work, rays, hits, adapt, blocks);
         self.packet_work = Some(work);
         result
     }
 
-    /// [`Tracer::packets`] in `work`, into `hits` (as long as `rays`).
-    fn packets_in(
+    /// [`Tracer::packets_in_order`] in `work`, into `hits` (as long as `rays`).
+    fn packets_in<const BLOCKS: bool>(
         &mut self,
         work: &mut Packets,
         rays: &[Ray],
         hits: &mut [Hit],
         adapt: bool,
+        mut blocks: Blocks,
     ) -> Result<()> {
         let Some(d) = &self.direct else {
             return Ok(());
@@ -691,12 +689,23 @@ impl<'s> Tracer<'s> {
         let (mut whole, mut packets) = (Walked::default(), 0);
         let judge = adapt;
         let mut adapt = adapt;
+        // Whether the batch's packets fell apart: its other rays go one at a time.
+        let mut alone = false;
         let mut screen = Screened::default();
-        for (i, r) in rays.iter().enumerate() {
-            let bit = 1 << (i % screen::LANES);
+        let mut after_judging = 0;
+        for p in 0..rays.len() {
+            let i = if BLOCKS { blocks.index(p) } else { p };
+            let bit = 1 << (p % screen::LANES);
             if bit == 1 {
-                screen = d.screen(rays.get(i..).unwrap_or_default());
+                screen = match (BLOCKS, &d.root_box) {
+                    (true, Some(b)) => blocks.screen(b, rays, p),
+                    _ => d.screen(rays.get(p..).unwrap_or_default()),
+                };
             }
+            let Some(r) = rays.get(i) else {
+                break;
+            };
+            after_judging += usize::from(alone);
             if screen.plain & bit == 0
                 && let Err(e) = r.validate()
             {
@@ -711,7 +720,7 @@ impl<'s> Tracer<'s> {
                 continue;
             }
             let mut gathered = packet::Gather::Alone;
-            if d.common_flags(r, true) {
+            if !alone && d.common_flags(r, true) {
                 let perm = permutation(r.direction);
                 gathered = work.gather(i as u32, r, perm);
                 if gathered == packet::Gather::Apart {
@@ -725,18 +734,16 @@ impl<'s> Tracer<'s> {
                             self.apart_for = if apart { APART_FOR } else { 0 };
                             if apart {
                                 self.in_blocks = false;
-                                // The rest one at a time, from this ray.
-                                let rest = (rays.get(i..), hits.get_mut(i..));
-                                if let (Some(rest), Some(rest_hits)) = rest {
-                                    result = d.trace_each::<false, true>(rest, rest_hits, i);
-                                    self.alone_after_judging += rest.len();
-                                }
-                                break;
+                                alone = true;
                             }
                         }
                     }
                     // (An empty packet takes any ray with a finite inverse.)
-                    gathered = work.gather(i as u32, r, perm);
+                    gathered = if alone {
+                        packet::Gather::Alone
+                    } else {
+                        work.gather(i as u32, r, perm)
+                    };
                 }
                 if gathered == packet::Gather::Taken
                     && let Some(root) = root
@@ -760,6 +767,7 @@ impl<'s> Tracer<'s> {
             whole.add(&walk(work, hits));
             packets += 1;
         }
+        self.alone_after_judging += after_judging;
         if judge && result.is_ok() && self.apart_for == 0 {
             self.in_blocks = packet::split_often(&whole, packets);
         }
