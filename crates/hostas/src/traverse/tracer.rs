@@ -689,7 +689,8 @@ impl<'s> Tracer<'s> {
         let (mut whole, mut packets) = (Walked::default(), 0);
         let judge = adapt;
         let mut adapt = adapt;
-        // Whether the batch's packets fell apart: its other rays go one at a time.
+        // Whether the batch's packets fell apart: in blocks, its other rays go one at a time
+        // (in its order, they go to `Direct::trace_each`).
         let mut alone = false;
         let mut screen = Screened::default();
         let mut after_judging = 0;
@@ -734,6 +735,16 @@ impl<'s> Tracer<'s> {
                             self.apart_for = if apart { APART_FOR } else { 0 };
                             if apart {
                                 self.in_blocks = false;
+                                if !BLOCKS {
+                                    // The rest one at a time, from this ray, on the one-ray
+                                    // walk's own stack (`Direct::trace_each`).
+                                    let rest = (rays.get(i..), hits.get_mut(i..));
+                                    if let (Some(rest), Some(rest_hits)) = rest {
+                                        result = d.trace_each::<false, true>(rest, rest_hits, i);
+                                        after_judging += rest.len();
+                                    }
+                                    break;
+                                }
                                 alone = true;
                             }
                         }
