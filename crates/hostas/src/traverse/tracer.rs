@@ -1697,6 +1697,25 @@ mod tests {
             }
             assert_eq!(hit_count, rays.len());
         }
+        // In blocks (as after a batch whose packets split often), the rest of a batch whose
+        // packets fall apart goes one at a time too, in the blocks' order.
+        assert_eq!(tile::row_length(&rays), Some(32));
+        let (positions, indices) = quad(128);
+        let scene = scene_of(&device, &positions, &indices);
+        let mut tracer = Tracer::new(&scene);
+        tracer.in_blocks = true;
+        let mut hits = Vec::new();
+        tracer.closest_batch(&rays, &mut hits).unwrap();
+        let alone = tracer.alone_after_judging;
+        assert!(
+            alone > rays.len() * 3 / 4 && alone < rays.len(),
+            "{alone} after"
+        );
+        assert!(!tracer.in_blocks);
+        assert_eq!(tracer.apart_for, APART_FOR);
+        for (ray, hit) in rays.iter().zip(&hits) {
+            assert_eq!(*hit, scene.trace_closest(ray).unwrap());
+        }
     }
 
     /// Under `Interleave::Auto`, a camera's batch over a soup of small random triangles (whose
