@@ -703,6 +703,7 @@ impl<'s> Tracer<'s> {
                     _ => d.screen(rays.get(p..).unwrap_or_default()),
                 };
             }
+            // (Always there: the blocks' indices lie in the batch.)
             let Some(r) = rays.get(i) else {
                 break;
             };
