@@ -8,6 +8,9 @@ instead of a lucky cell. The timed ratios come from each run's paired phase wher
 without paired records (older runs, `--pairs 0`, a skipped pair) fall back to the ratio of the
 two per-library medians, and such cells are marked. Usage:
 targets.py RUN1.jsonl [RUN2.jsonl ...] > table.md
+
+Below the table, each target's cells: the median (unrounded) against the target, and how many
+runs were at it on their own, so that a cell which flips from run to run shows as such.
 """
 import json
 import statistics
@@ -86,6 +89,14 @@ def fmt(values, digits=2):
     return f"{m:.{digits}f} ({min(values):.{digits}f}–{max(values):.{digits}f})"
 
 
+def meets(value, target):
+    """Whether `value` is at `target` ("≥ 1.5", "≤ 40"); None for a column without one."""
+    if not target or value is None:
+        return None
+    op, bound = target.split()
+    return value >= float(bound) if op == "≥" else value <= float(bound)
+
+
 def main(paths):
     runs = [rows(p) for p in paths]
     # The all-threads count of each run (the JSON keys threads by number).
@@ -112,9 +123,11 @@ def main(paths):
           f"per-library medians instead. SAH: ratio of the two values.\n")
     print("| scene | " + " | ".join(titles) + " |")
     print("|---|" + "--:|" * len(titles))
+    # Per targeted column: (scene, median, runs at target, runs) for the summary.
+    verdicts = {c[0]: [] for c in COLUMNS + ABSOLUTE if c[1]}
     for s in scenes:
         cells = []
-        for _, _, num, den, pname in COLUMNS:
+        for title, target, num, den, pname in COLUMNS:
             ratios, fell_back = [], False
             for r, p in runs:
                 if pname and (s, pname) in p:
@@ -125,10 +138,32 @@ def main(paths):
                     ratios.append(a / b)
                     fell_back = fell_back or pname is not None
             cells.append(fmt(ratios) + (f" {FALLBACK}" if fell_back else ""))
-        for _, _, src in ABSOLUTE:
-            cells.append(fmt([get(r, s, *src) for r, _ in runs], 1))
+            verdict(verdicts, title, target, s, ratios)
+        for title, target, src in ABSOLUTE:
+            values = [v for v in (get(r, s, *src) for r, _ in runs) if v is not None]
+            cells.append(fmt(values, 1))
+            verdict(verdicts, title, target, s, values)
         print(f"| {s} | " + " | ".join(cells) + " |")
+    summary(verdicts, {c[0]: c[1] for c in COLUMNS + ABSOLUTE})
 
+
+def verdict(verdicts, title, target, scene, values):
+    """Notes a targeted cell's median and its runs at target."""
+    if target and values:
+        at = sum(1 for v in values if meets(v, target))
+        verdicts[title].append((scene, statistics.median(values), at, len(values)))
+
+
+def summary(verdicts, targets):
+    """The cells whose median meets its target, and per cell how many runs did."""
+    cells = [(t, c) for t, cs in verdicts.items() for c in cs]
+    met = [(t, c) for t, c in cells if meets(c[1], targets[t])]
+    print(f"\nMedians at target: {len(met)} of {len(cells)} cells. Per target, each scene's "
+          f"median (unrounded) and the runs at target on their own:\n")
+    for t, cs in verdicts.items():
+        parts = [f"{s} {m:.3f} {'met' if meets(m, targets[t]) else 'not met'} ({at}/{n})"
+                 for s, m, at, n in cs]
+        print(f"- {t} ({targets[t]}): " + "; ".join(parts))
 
 if __name__ == "__main__":
     if len(sys.argv) < 2:
