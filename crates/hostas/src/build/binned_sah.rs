@@ -4,11 +4,11 @@
 //! moves it back, so the final order is the order of `refs` on return. Small ranges are split with
 //! an exact SAH sweep over sorted centroids instead of bins; their centroids are sorted once, and
 //! each sweep split hands its sides their orders. Ranges of 16,384 or more are binned on every
-//! fourth or eighth reference ([`SAMPLE_FROM`]); their partitions compute the sides' bounds (which
+//! fourth or eighth reference (`SAMPLE_FROM`); their partitions compute the sides' bounds (which
 //! is why large ones need no counting pass on one thread: the bins do not count the sides, and the
 //! right side is placed from the end).
 //!
-//! While the builder runs, each reference holds its bounds as `(lo, -hi)` ([`Box8`]): negated
+//! While the builder runs, each reference holds its bounds as `(lo, -hi)` (`Box8`): negated
 //! once on entry (with the pass that bounds the root) and restored on return, instead of on
 //! every binning, partition and sweep that reads it.
 

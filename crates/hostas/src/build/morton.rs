@@ -4,7 +4,7 @@
 //!
 //! The passes: centroid bounds (unless the decoder computed them); keys `(code, position)` with the first digit's histogram;
 //! the radix sort; the tree, whose leaves gather their primitives in sorted order into their
-//! final place while computing their bounds (see [`Gather`]).
+//! final place while computing their bounds (see `Gather`).
 
 use super::tree::{Child, NodeList, Tree, node_hint};
 use super::{MEDIAN_DEPTH, PARALLEL_THRESHOLD, PrimRef};

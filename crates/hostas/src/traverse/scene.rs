@@ -263,7 +263,7 @@ impl Scene {
     /// hit (`TerminateOnFirstHit`) when `any_hit` is set. Results are in ray order; an invalid
     /// ray's error names its index in `rays` ([`Location::ray`](crate::Location::ray)). The
     /// rays go through [`Tracer::closest_batch`](super::Tracer::closest_batch) or
-    /// [`Tracer::any_batch`](super::Tracer::any_batch) in chunks of [`TRACE_CHUNK`] rays
+    /// [`Tracer::any_batch`](super::Tracer::any_batch) in chunks of `TRACE_CHUNK` (1,024) rays
     /// (interleaved walks where they pay).
     pub fn trace_batch(&self, rays: &[Ray], any_hit: bool) -> Result<Vec<Hit>> {
         use rayon::prelude::*;
