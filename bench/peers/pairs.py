@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """Each paired trace target's times pair by pair (hostas ms | Embree ms, in the order run) and
-its median ratio, per file, with the CPU the run's one-thread phases were pinned to: what shows whether a low ratio came from a few pairs or from all
-(a slow stretch of seconds on the lent machine slows every pair in it, hostas more than
-Embree).
+its median ratio, per file, with the CPU the run's one-thread phases were pinned to: what
+shows whether a low ratio came from a few pairs or from all (a slow stretch of seconds on the
+lent machine slows every pair in it, hostas more than Embree).
 usage: pairs.py RUN.jsonl... [--measure "primary rays 1T"]
 """
 import json
