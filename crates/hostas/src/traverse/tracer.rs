@@ -746,7 +746,10 @@ impl<'s> Tracer<'s> {
                                     }
                                     break;
                                 }
+                                // This ray goes alone too (the count of the rays
+                                // after it is taken as they come).
                                 alone = true;
+                                after_judging += 1;
                             }
                         }
                     }
