@@ -14,7 +14,9 @@ use crate::peers;
 use crate::rays::{Hit, Kind, Ray, RaySet};
 use crate::scene::Scene;
 use crate::util::median;
-use std::time::Duration;
+use std::hint::black_box;
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
 
 /// One library's side of a pair.
 pub trait Side {
@@ -76,11 +78,12 @@ pub const FAST_TRACE_INCOHERENT_ROBUST: Target = Target {
     embree: "MEDIUM_ROBUST",
 };
 
-/// The timed parts of each pair, in ms.
+/// The timed parts of each pair, in ms, and the [`canary`] timed just before each pair, in µs.
 #[derive(Default)]
 pub struct Pairs {
     pub hostas_ms: Vec<f64>,
     pub embree_ms: Vec<f64>,
+    pub canary_us: Vec<f64>,
 }
 
 impl Pairs {
@@ -127,6 +130,7 @@ fn alternate(
     let mut out = Pairs::default();
     for i in 0..pairs {
         let last = i + 1 == pairs;
+        out.canary_us.push(canary());
         let (h, e) = if i % 2 == 0 {
             let h = hostas(last)?;
             (h, embree(last)?)
@@ -138,6 +142,45 @@ fn alternate(
         out.embree_ms.push(ms(e));
     }
     Ok(out)
+}
+
+/// Bytes of [`canary`]'s cycle: three quarters of the lent Xeon's L2 (2 MiB a core).
+const CANARY_BYTES: usize = 3 << 19;
+/// Dependent loads [`canary`] times.
+const CANARY_STEPS: usize = 20_000;
+
+/// The time of a fixed walk through memory that fits the core's L2 cache, in µs: one pass
+/// over a buffer of [`CANARY_BYTES`] brings it in, then [`CANARY_STEPS`] dependent loads follow
+/// a random cycle through it (each waits for the one before: the time is the L2's latency,
+/// or the L3's where the buffer no longer fits). The lent Xeon has stretches of seconds to
+/// minutes in which hostas's one-thread trace of a mesh slows by 50-85% and Embree's by
+/// 15-35%. The thirty-ninth session's probes found that busy loops on the machine's other
+/// CPUs do not decide them and that a timed loop of arithmetic does not see them; this walk
+/// does (its time correlates with both sides'). Timed before each pair, it says how busy the
+/// core's caches were when the pair ran.
+fn canary() -> f64 {
+    static CYCLE: OnceLock<Vec<u32>> = OnceLock::new();
+    let next = CYCLE.get_or_init(|| {
+        // Sattolo's shuffle (a fixed xorshift seed): one cycle through every entry.
+        let n = CANARY_BYTES / 4;
+        let mut next: Vec<u32> = (0..n as u32).collect();
+        let mut s = 0x2545_f491_4f6c_dd1d_u64;
+        for i in (1..n).rev() {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            next.swap(i, (s % i as u64) as usize);
+        }
+        next
+    });
+    black_box(next.iter().fold(0u32, |a, &x| a ^ x));
+    let t = Instant::now();
+    let mut i = 0u32;
+    for _ in 0..CANARY_STEPS {
+        i = next[i as usize];
+    }
+    black_box(i);
+    t.elapsed().as_secs_f64() * 1e6
 }
 
 type Sides<'a> = (Box<dyn Side + 'a>, Box<dyn Side + 'a>);

@@ -452,7 +452,8 @@ impl SceneReport {
                     Ok(p) => {
                         let (median, min, max) = p.summary();
                         json!({"median": median, "min": min, "max": max, "n": p.hostas_ms.len(),
-                               "ratios": p.ratios(), "hostas_ms": p.hostas_ms, "embree_ms": p.embree_ms})
+                               "ratios": p.ratios(), "hostas_ms": p.hostas_ms, "embree_ms": p.embree_ms,
+                               "canary_us": p.canary_us})
                     }
                     Err(why) => json!({"skipped": why, "n": 0}),
                 };
