@@ -165,6 +165,7 @@ def summary(verdicts, targets):
                  for s, m, at, n in cs]
         print(f"- {t} ({targets[t]}): " + "; ".join(parts))
 
+
 if __name__ == "__main__":
     if len(sys.argv) < 2:
         sys.exit(__doc__)
