@@ -7,24 +7,26 @@ else took the L2 (or the L3) just then. This pools the pairs of every file given
 into thirds by their canary time (the same cuts for every cell) and prints, per trace
 target and scene, the median pair ratio (hostas ÷ Embree throughput) in each third, and the
 rank correlation of the canary with each side's time. Context for the target table, not a
-replacement: `targets.py` reads every pair alike.
-usage: canary.py RUN.jsonl... > by-canary.md
+replacement: `targets.py` reads every pair alike. With `--l1`, the pairs are cut by the walk
+through 24 KiB instead (`canary_l1_us`: the L1 data cache, which a core's two hardware
+threads share; runs from the forty-first session on).
+usage: canary.py [--l1] RUN.jsonl... > by-canary.md
 """
 import json
 import statistics
 import sys
 
 
-def pairs(paths):
+def pairs(paths, field):
     """(scene, measure, embree key) -> [(canary µs, hostas ms, Embree ms)] of the trace targets."""
     out = {}
     for path in paths:
         for line in open(path):
             d = json.loads(line)
-            if "canary_us" not in d or "build" in d.get("measure", ""):
+            if field not in d or "build" in d.get("measure", ""):
                 continue
             key = (d["scene"], d["measure"], d["embree_key"])
-            out.setdefault(key, []).extend(zip(d["canary_us"], d["hostas_ms"], d["embree_ms"]))
+            out.setdefault(key, []).extend(zip(d[field], d["hostas_ms"], d["embree_ms"]))
     return out
 
 
@@ -41,13 +43,17 @@ def spearman(a, b):
     return statistics.correlation(ranks(a), ranks(b)) if len(a) > 1 else float("nan")
 
 
-def main(paths):
+def main(args):
+    field = "canary_l1_us" if args[:1] == ["--l1"] else "canary_us"
+    paths = args[1:] if field == "canary_l1_us" else args
     if not paths:
         sys.exit(__doc__)
-    cells = pairs(paths)
+    cells = pairs(paths, field)
     every = sorted(c for v in cells.values() for c, _, _ in v)
     if not every:
-        sys.exit("no pair has a canary time (runs before the thirty-ninth session's benchmark)")
+        sys.exit(f"no pair has a {field} time (runs before the "
+                 + ("forty-first" if field == "canary_l1_us" else "thirty-ninth")
+                 + " session's benchmark)")
     cut = [every[len(every) // 3], every[2 * len(every) // 3]]
     print(f"{len(every)} pairs from {len(paths)} files; canary thirds: below {cut[0]:.0f} µs, "
           f"{cut[0]:.0f}-{cut[1]:.0f} µs, above {cut[1]:.0f} µs (lowest {every[0]:.0f} µs)\n")

@@ -78,12 +78,14 @@ pub const FAST_TRACE_INCOHERENT_ROBUST: Target = Target {
     embree: "MEDIUM_ROBUST",
 };
 
-/// The timed parts of each pair, in ms, and the [`canary`] timed just before each pair, in µs.
+/// The timed parts of each pair, in ms, and the canaries timed just before each pair, in µs:
+/// [`L2_CANARY`] and [`L1_CANARY`].
 #[derive(Default)]
 pub struct Pairs {
     pub hostas_ms: Vec<f64>,
     pub embree_ms: Vec<f64>,
     pub canary_us: Vec<f64>,
+    pub canary_l1_us: Vec<f64>,
 }
 
 impl Pairs {
@@ -130,7 +132,8 @@ fn alternate(
     let mut out = Pairs::default();
     for i in 0..pairs {
         let last = i + 1 == pairs;
-        out.canary_us.push(canary());
+        out.canary_us.push(L2_CANARY.time());
+        out.canary_l1_us.push(L1_CANARY.time());
         let (h, e) = if i % 2 == 0 {
             let h = hostas(last)?;
             (h, embree(last)?)
@@ -144,43 +147,59 @@ fn alternate(
     Ok(out)
 }
 
-/// Bytes of [`canary`]'s cycle: three quarters of the lent Xeon's L2 (2 MiB a core).
-const CANARY_BYTES: usize = 3 << 19;
-/// Dependent loads [`canary`] times.
-const CANARY_STEPS: usize = 20_000;
-
-/// The time of a fixed walk through memory that fits the core's L2 cache, in µs: one pass
-/// over a buffer of [`CANARY_BYTES`] brings it in, then [`CANARY_STEPS`] dependent loads follow
-/// a random cycle through it (each waits for the one before: the time is the L2's latency,
-/// or the L3's where the buffer no longer fits). The lent Xeon has stretches of seconds to
+/// A fixed walk through a buffer that fits one of the core's caches, timed in µs: one pass
+/// over the buffer brings it in, then [`CANARY_STEPS`] dependent loads follow a random cycle
+/// through it (each waits for the one before: the time is that cache's latency, or the next
+/// level's where the buffer no longer fits). The lent Xeon has stretches of seconds to
 /// minutes in which hostas's one-thread trace of a mesh slows by 50-85% and Embree's by
 /// 15-35%. The thirty-ninth session's probes found that busy loops on the machine's other
-/// CPUs do not decide them and that a timed loop of arithmetic does not see them; this walk
-/// does (its time correlates with both sides'). Timed before each pair, it says how busy the
-/// core's caches were when the pair ran.
-fn canary() -> f64 {
-    static CYCLE: OnceLock<Vec<u32>> = OnceLock::new();
-    let next = CYCLE.get_or_init(|| {
-        // Sattolo's shuffle (a fixed xorshift seed): one cycle through every entry.
-        let n = CANARY_BYTES / 4;
-        let mut next: Vec<u32> = (0..n as u32).collect();
-        let mut s = 0x2545_f491_4f6c_dd1d_u64;
-        for i in (1..n).rev() {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            next.swap(i, (s % i as u64) as usize);
+/// CPUs do not decide them and that a timed loop of arithmetic does not see them; the L2 walk
+/// does (its time correlates with both sides'). Timed before each pair, the walks say how busy
+/// the core's caches were when the pair ran.
+struct Canary {
+    bytes: usize,
+    cycle: OnceLock<Vec<u32>>,
+}
+
+/// Three quarters of the lent Xeon's L2 (2 MiB a core).
+static L2_CANARY: Canary = Canary::new(3 << 19);
+/// Three quarters of the VM's L1 data cache (32 KiB; the Xeon's is 48 KiB), which a core's
+/// two hardware threads share: whether the slow stretches are the L1's.
+static L1_CANARY: Canary = Canary::new(3 << 13);
+/// Dependent loads a [`Canary`] times.
+const CANARY_STEPS: usize = 20_000;
+
+impl Canary {
+    const fn new(bytes: usize) -> Canary {
+        Canary {
+            bytes,
+            cycle: OnceLock::new(),
         }
-        next
-    });
-    black_box(next.iter().fold(0u32, |a, &x| a ^ x));
-    let t = Instant::now();
-    let mut i = 0u32;
-    for _ in 0..CANARY_STEPS {
-        i = next[i as usize];
     }
-    black_box(i);
-    t.elapsed().as_secs_f64() * 1e6
+
+    fn time(&self) -> f64 {
+        let next = self.cycle.get_or_init(|| {
+            // Sattolo's shuffle (a fixed xorshift seed): one cycle through every entry.
+            let n = self.bytes / 4;
+            let mut next: Vec<u32> = (0..n as u32).collect();
+            let mut s = 0x2545_f491_4f6c_dd1d_u64;
+            for i in (1..n).rev() {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                next.swap(i, (s % i as u64) as usize);
+            }
+            next
+        });
+        black_box(next.iter().fold(0u32, |a, &x| a ^ x));
+        let t = Instant::now();
+        let mut i = 0u32;
+        for _ in 0..CANARY_STEPS {
+            i = next[i as usize];
+        }
+        black_box(i);
+        t.elapsed().as_secs_f64() * 1e6
+    }
 }
 
 type Sides<'a> = (Box<dyn Side + 'a>, Box<dyn Side + 'a>);

@@ -453,7 +453,7 @@ impl SceneReport {
                         let (median, min, max) = p.summary();
                         json!({"median": median, "min": min, "max": max, "n": p.hostas_ms.len(),
                                "ratios": p.ratios(), "hostas_ms": p.hostas_ms, "embree_ms": p.embree_ms,
-                               "canary_us": p.canary_us})
+                               "canary_us": p.canary_us, "canary_l1_us": p.canary_l1_us})
                     }
                     Err(why) => json!({"skipped": why, "n": 0}),
                 };

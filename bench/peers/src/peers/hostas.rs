@@ -110,9 +110,10 @@ fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
     // (about 90 bytes per ray) should stay near the core for the rays traced one at a time.
     let mut tracer = scene.tracer();
     let mode = interleave_mode();
-    let mut batch = Vec::with_capacity(BATCH);
-    let mut found = Vec::with_capacity(BATCH);
-    for (rs, hs) in rays.chunks(BATCH).zip(hits.chunks_mut(BATCH)) {
+    let size = batch_size();
+    let mut batch = Vec::with_capacity(size);
+    let mut found = Vec::with_capacity(size);
+    for (rs, hs) in rays.chunks(size).zip(hits.chunks_mut(size)) {
         batch.clear();
         batch.extend(rs.iter().map(|r| hostas::Ray::new(r.o, r.d)));
         tracer
@@ -145,6 +146,15 @@ fn interleave_mode() -> hostas::Interleave {
 
 /// Rays per [`hostas::Tracer::closest_batch`] call.
 const BATCH: usize = 1024;
+
+/// [`BATCH`], or `HOSTAS_BATCH` where set (a positive number), to measure other batch sizes.
+fn batch_size() -> usize {
+    std::env::var("HOSTAS_BATCH")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(BATCH)
+}
 
 fn run_preset(
     scene: &Scene,
