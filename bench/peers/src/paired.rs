@@ -164,7 +164,8 @@ struct Canary {
 /// Three quarters of the lent Xeon's L2 (2 MiB a core).
 static L2_CANARY: Canary = Canary::new(3 << 19);
 /// Three quarters of the VM's L1 data cache (32 KiB; the Xeon's is 48 KiB), which a core's
-/// two hardware threads share: whether the slow stretches are the L1's.
+/// two hardware threads share: whether the slow stretches are the L1's (the forty-first
+/// session: it barely moves in them, while the L2 walk doubles).
 static L1_CANARY: Canary = Canary::new(3 << 13);
 /// Dependent loads a [`Canary`] times.
 const CANARY_STEPS: usize = 20_000;
