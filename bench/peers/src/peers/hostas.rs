@@ -34,6 +34,7 @@ use crate::scene::Scene;
 use crate::util::{median_ms, pool, time};
 use hostas::{AccelerationStructure, BuildGeometryInfo, BuildRangeInfo, Device, Geometry, vk};
 use serde_json::json;
+use std::sync::OnceLock;
 use std::time::Duration;
 
 type Flags = vk::BuildAccelerationStructureFlagsKHR;
@@ -135,26 +136,34 @@ fn trace(scene: &hostas::Scene, rays: &[Ray], hits: &mut [Hit]) {
 
 /// How hostas walks each batch: `HOSTAS_INTERLEAVE=always`, `never` or `packets` overrides
 /// hostas's own choice (`auto`), to measure the interleaved or packet walk against one ray at
-/// a time.
+/// a time. Read once, outside the timed passes; any other value stops the benchmark.
 fn interleave_mode() -> hostas::Interleave {
-    match std::env::var("HOSTAS_INTERLEAVE").as_deref() {
+    static MODE: OnceLock<hostas::Interleave> = OnceLock::new();
+    *MODE.get_or_init(|| match std::env::var("HOSTAS_INTERLEAVE").as_deref() {
+        Err(std::env::VarError::NotPresent) | Ok("auto") => hostas::Interleave::Auto,
         Ok("always") => hostas::Interleave::Always,
         Ok("never") => hostas::Interleave::Never,
         Ok("packets") => hostas::Interleave::Packets,
-        _ => hostas::Interleave::Auto,
-    }
+        Ok(v) => panic!("HOSTAS_INTERLEAVE must be auto, always, never or packets, not {v:?}"),
+        Err(e) => panic!("HOSTAS_INTERLEAVE: {e}"),
+    })
 }
 
 /// Rays per [`hostas::Tracer::closest_batch`] call.
 const BATCH: usize = 1024;
 
-/// [`BATCH`], or `HOSTAS_BATCH` where set (a positive number), to measure other batch sizes.
+/// [`BATCH`], or `HOSTAS_BATCH` where set, to measure other batch sizes. Read once, outside
+/// the timed passes; anything but a positive number stops the benchmark.
 fn batch_size() -> usize {
-    std::env::var("HOSTAS_BATCH")
-        .ok()
-        .and_then(|v| v.parse().ok())
-        .filter(|&n| n > 0)
-        .unwrap_or(BATCH)
+    static SIZE: OnceLock<usize> = OnceLock::new();
+    *SIZE.get_or_init(|| match std::env::var("HOSTAS_BATCH") {
+        Err(std::env::VarError::NotPresent) => BATCH,
+        v => v
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .filter(|&n: &usize| n > 0)
+            .unwrap_or_else(|| panic!("HOSTAS_BATCH must be a positive number of rays")),
+    })
 }
 
 fn run_preset(
