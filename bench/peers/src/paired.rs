@@ -13,7 +13,7 @@ use crate::Cfg;
 use crate::peers;
 use crate::rays::{Hit, Kind, Ray, RaySet};
 use crate::scene::Scene;
-use crate::util::median;
+use crate::util::{Rng, median};
 use std::hint::black_box;
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
@@ -180,15 +180,12 @@ impl Canary {
 
     fn time(&self) -> f64 {
         let next = self.cycle.get_or_init(|| {
-            // Sattolo's shuffle (a fixed xorshift seed): one cycle through every entry.
+            // Sattolo's shuffle (a fixed seed): one cycle through every entry.
             let n = self.bytes / 4;
             let mut next: Vec<u32> = (0..n as u32).collect();
-            let mut s = 0x2545_f491_4f6c_dd1d_u64;
+            let mut rng = Rng::new(0xca4a);
             for i in (1..n).rev() {
-                s ^= s << 13;
-                s ^= s >> 7;
-                s ^= s << 17;
-                next.swap(i, (s % i as u64) as usize);
+                next.swap(i, (rng.next_u64() % i as u64) as usize);
             }
             next
         });
